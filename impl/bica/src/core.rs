@@ -293,7 +293,8 @@ impl SchedulerCore {
         }
     }
 
-    /// Appends `id` to the end of the active list. Its release grid starts at `now_ns`;
+    /// Appends `id` to the end of the active list. Its release grid restarts at `now_ns`
+    /// (or at its pending release, if that is later);
     /// if it was inactive for more than `reactivation_gap_periods` periods, its next run
     /// reports the gap. Activating an active component does nothing.
     pub fn activate(&mut self, id: ComponentId, now_ns: u64) -> Result<(), BicaError> {
@@ -316,7 +317,9 @@ impl SchedulerCore {
                 state.reactivation_pending_gap_ns = Some(gap);
             }
         }
-        state.next_release_ns = Some(now_ns);
+        // Restart the grid at `now_ns`, unless the old grid's next release is still ahead:
+        // keeping it then stops a quick deactivate/activate from running twice in a period.
+        state.next_release_ns = Some(state.next_release_ns.map_or(now_ns, |release| release.max(now_ns)));
         self.active.push(id);
         self.trace.push(TraceEvent::Activated { component: id, at_ns: now_ns });
         Ok(())
@@ -444,7 +447,7 @@ impl SchedulerCore {
             let gap = now_ns - seen.min(now_ns);
             if gap > gap_limit {
                 state.reactivation_pending_gap_ns = Some(gap);
-                state.next_release_ns = Some(now_ns);
+                state.next_release_ns = Some(state.next_release_ns.map_or(now_ns, |release| release.max(now_ns)));
             }
         }
         state.last_seen_ns = Some(now_ns);
