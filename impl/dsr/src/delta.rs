@@ -1,0 +1,619 @@
+//! Deltas: the unit of replication, and their wire format.
+//!
+//! A [`Delta`] is a small causal-CRDT state — a dot store plus the causal context of the dots it adds or removes —
+//! produced by one local operation, or a whole replica state (a *snapshot*). Joining deltas is commutative,
+//! associative and idempotent, so they may travel in any order, any number of times.
+//!
+//! The wire format is `postcard` (varints) behind a one-byte header (format version and flags). Built-in attribute
+//! names travel as their 1–2 byte code in the type dictionary, and dots as offsets from the delta's own dots where
+//! they can, so a one-attribute `f32` update is about 40 bytes. Decoding checks structure (ids, dots, names,
+//! limits) and returns a [`DeltaError`] that says where; it never panics. Type checks against the receiving
+//! replica's dictionary happen in [`crate::Replica::apply`].
+
+use serde::{Deserialize, Serialize};
+use smallvec::SmallVec;
+
+use crate::causal::CausalContext;
+use crate::dictionary::Dictionary;
+use crate::error::DeltaError;
+use crate::ids::{Dot, EdgeKey, Name, NodeId, ReplicaId, Stamp};
+use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store};
+use crate::value::Value;
+
+/// The wire format version this build writes and reads.
+pub const WIRE_VERSION: u8 = 1;
+
+/// The largest number of dots one delta may generate, and of items in one list (a decoding limit).
+pub const MAX_ITEMS: usize = 1 << 24;
+
+/// The dots a delta generated: `first..=last` of one replica.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Origin {
+    /// The replica whose operation made the delta.
+    pub replica: ReplicaId,
+    /// First dot counter generated.
+    pub first: u64,
+    /// Last dot counter generated.
+    pub last: u64,
+}
+
+impl Origin {
+    /// The dots generated.
+    pub fn dots(&self) -> impl Iterator<Item = Dot> + '_ {
+        (self.first..=self.last).map(|counter| Dot::new(self.replica, counter))
+    }
+}
+
+/// A delta (the effect of one operation) or a snapshot (a whole replica state), ready to join into a replica.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Delta {
+    pub(crate) origin: Option<Origin>,
+    pub(crate) complete: bool,
+    pub(crate) ctx: CausalContext,
+    pub(crate) store: Store,
+}
+
+impl Delta {
+    /// The dots this delta generated, if it is the effect of one operation.
+    pub fn origin(&self) -> Option<Origin> {
+        self.origin
+    }
+
+    /// Whether this is a whole replica state (a snapshot) rather than the effect of one operation.
+    pub fn is_snapshot(&self) -> bool {
+        self.complete
+    }
+
+    /// The causal context: the dots this delta adds or removes.
+    pub fn context(&self) -> &CausalContext {
+        &self.ctx
+    }
+
+    /// The dot store (for inspection and tests).
+    pub fn store(&self) -> &Store {
+        &self.store
+    }
+
+    /// Number of node entries, edge entries and tombstones carried.
+    pub fn len(&self) -> usize {
+        self.store.nodes.len() + self.store.edges.len() + self.store.tombstones.len()
+    }
+
+    /// Whether the delta carries nothing but its context.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Bytes of attribute payload carried (contents only).
+    pub fn payload_bytes(&self) -> usize {
+        let attrs = |attrs: &Attrs| -> usize {
+            attrs
+                .values()
+                .flat_map(|r| r.values.iter())
+                .map(|e| e.value.payload_len())
+                .sum()
+        };
+        self.store
+            .nodes
+            .values()
+            .map(|n| attrs(&n.attrs))
+            .sum::<usize>()
+            + self
+                .store
+                .edges
+                .values()
+                .map(|e| attrs(&e.attrs))
+                .sum::<usize>()
+    }
+
+    /// The highest stamp carried (for the hybrid logical clock).
+    pub(crate) fn max_stamp(&self) -> Stamp {
+        let attrs = |attrs: &Attrs| {
+            attrs
+                .values()
+                .flat_map(|r| r.values.iter().map(|e| e.stamp))
+                .max()
+        };
+        let nodes = self
+            .store
+            .nodes
+            .values()
+            .flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
+        let edges = self.store.edges.values().flat_map(|e| {
+            e.presence
+                .values
+                .iter()
+                .map(|p| p.stamp)
+                .chain(attrs(&e.attrs))
+        });
+        nodes.chain(edges).max().unwrap_or_default()
+    }
+
+    /// Encodes the delta into a new buffer.
+    ///
+    /// # Examples
+    /// ```
+    /// use dsr::{Delta, Replica, ReplicaId, NewNode};
+    /// let mut a = Replica::new(ReplicaId(1));
+    /// let (_, delta) = a.insert_node(10, NewNode::new("world", "world")).unwrap();
+    /// let bytes = delta.encode();
+    /// let decoded = Delta::decode(&bytes).unwrap();
+    /// assert_eq!(&decoded, &*delta);
+    /// ```
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        self.encode_into(&mut out);
+        out
+    }
+
+    /// Appends the encoded delta to `out`.
+    pub fn encode_into(&self, out: &mut Vec<u8>) {
+        let wire = to_wire(self);
+        out.push((WIRE_VERSION << 1) | u8::from(self.complete));
+        let encoded = postcard::to_extend(&wire, std::mem::take(out))
+            .expect("encoding into a Vec cannot fail");
+        *out = encoded;
+    }
+
+    /// Decodes a delta, checking its structure.
+    ///
+    /// # Errors
+    /// [`DeltaError`] saying what is wrong and where: bad bytes, an unknown version, zero ids, a value whose dot is
+    /// not in the context, an invalid name, or a list over [`MAX_ITEMS`].
+    pub fn decode(bytes: &[u8]) -> Result<Delta, DeltaError> {
+        let (&header, body) = bytes
+            .split_first()
+            .ok_or_else(|| DeltaError::Encoding("empty input (no header byte)".into()))?;
+        let version = header >> 1;
+        if version != WIRE_VERSION {
+            return Err(DeltaError::Version {
+                found: version,
+                supported: WIRE_VERSION,
+            });
+        }
+        let complete = header & 1 == 1;
+        let (wire, rest): (WireDelta<'_>, &[u8]) = postcard::take_from_bytes(body)
+            .map_err(|e| DeltaError::Encoding(format!("{e} (body of {} bytes)", body.len())))?;
+        if !rest.is_empty() {
+            return Err(DeltaError::Encoding(format!(
+                "{} trailing bytes after the delta",
+                rest.len()
+            )));
+        }
+        from_wire(wire, complete)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Wire structures.
+
+#[derive(Serialize, Deserialize)]
+struct WireDelta<'a> {
+    origin: Option<(u32, u64, u32)>,
+    vv: Vec<(u32, u64)>,
+    cloud: Vec<WireDot>,
+    tombstones: Vec<u64>,
+    #[serde(borrow)]
+    nodes: Vec<WireNode<'a>>,
+    #[serde(borrow)]
+    edges: Vec<WireEdge<'a>>,
+}
+
+/// A dot, relative to the delta's first generated dot when it is of the same replica.
+#[derive(Serialize, Deserialize, Clone, Copy)]
+enum WireDot {
+    Same(i64),
+    Other(u32, u64),
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireNode<'a> {
+    id: u64,
+    #[serde(borrow)]
+    core: Vec<WireEntry<(&'a str, &'a str)>>,
+    #[serde(borrow)]
+    attrs: Vec<WireRegister<'a>>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireEdge<'a> {
+    from: u64,
+    to: u64,
+    edge_type: &'a str,
+    presence: Vec<WireEntry<()>>,
+    #[serde(borrow)]
+    attrs: Vec<WireRegister<'a>>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireRegister<'a> {
+    #[serde(borrow)]
+    name: WireName<'a>,
+    values: Vec<WireEntry<Value>>,
+}
+
+#[derive(Serialize, Deserialize)]
+enum WireName<'a> {
+    Builtin(u16),
+    Text(&'a str),
+}
+
+#[derive(Serialize, Deserialize)]
+struct WireEntry<T> {
+    dot: WireDot,
+    stamp: [u8; 8],
+    value: T,
+}
+
+fn wire_dot(dot: Dot, origin: Option<Origin>) -> WireDot {
+    match origin {
+        Some(o) if o.replica == dot.replica => {
+            WireDot::Same(dot.counter.wrapping_sub(o.first) as i64)
+        }
+        _ => WireDot::Other(dot.replica.0, dot.counter),
+    }
+}
+
+fn to_wire(delta: &Delta) -> WireDelta<'_> {
+    let origin = delta.origin;
+    let generated = |dot: &Dot| {
+        origin
+            .is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter))
+    };
+    // The generated dots are implied by `origin`; the rest of the context travels explicitly.
+    let mut vv = Vec::new();
+    let mut cloud = Vec::new();
+    for &(replica, counter) in delta.ctx.version_vector() {
+        match origin {
+            // The entry ends at the generated range: send only the part before it.
+            Some(o) if o.replica == replica && counter == o.last => {
+                if o.first > 1 {
+                    vv.push((replica.0, o.first - 1));
+                }
+            }
+            _ => vv.push((replica.0, counter)),
+        }
+    }
+    for dot in delta.ctx.cloud() {
+        if !generated(dot) {
+            cloud.push(wire_dot(*dot, origin));
+        }
+    }
+    let entries = |register: &Register<Value>| -> Vec<WireEntry<Value>> {
+        register
+            .values
+            .iter()
+            .map(|e| WireEntry {
+                dot: wire_dot(e.dot, origin),
+                stamp: e.stamp.0.to_le_bytes(),
+                value: e.value.clone(),
+            })
+            .collect()
+    };
+    fn attrs<'d>(
+        attrs: &'d Attrs,
+        entries: &dyn Fn(&Register<Value>) -> Vec<WireEntry<Value>>,
+    ) -> Vec<WireRegister<'d>> {
+        attrs
+            .iter()
+            .map(|(name, register)| WireRegister {
+                name: match Dictionary::builtin_attr_code(name) {
+                    Some(code) => WireName::Builtin(code),
+                    None => WireName::Text(name.as_str()),
+                },
+                values: entries(register),
+            })
+            .collect()
+    }
+    WireDelta {
+        origin: origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)),
+        vv,
+        cloud,
+        tombstones: delta.store.tombstones.iter().map(|id| id.0).collect(),
+        nodes: delta
+            .store
+            .nodes
+            .iter()
+            .map(|(id, node)| WireNode {
+                id: id.0,
+                core: node
+                    .core
+                    .values
+                    .iter()
+                    .map(|e| WireEntry {
+                        dot: wire_dot(e.dot, origin),
+                        stamp: e.stamp.0.to_le_bytes(),
+                        value: (e.value.node_type.as_str(), e.value.name.as_str()),
+                    })
+                    .collect(),
+                attrs: attrs(&node.attrs, &entries),
+            })
+            .collect(),
+        edges: delta
+            .store
+            .edges
+            .iter()
+            .map(|(key, edge)| WireEdge {
+                from: key.from.0,
+                to: key.to.0,
+                edge_type: key.edge_type.as_str(),
+                presence: edge
+                    .presence
+                    .values
+                    .iter()
+                    .map(|e| WireEntry {
+                        dot: wire_dot(e.dot, origin),
+                        stamp: e.stamp.0.to_le_bytes(),
+                        value: (),
+                    })
+                    .collect(),
+                attrs: attrs(&edge.attrs, &entries),
+            })
+            .collect(),
+    }
+}
+
+fn invalid(place: impl Into<String>, what: impl Into<String>) -> DeltaError {
+    DeltaError::InvalidId {
+        place: place.into(),
+        what: what.into(),
+    }
+}
+
+fn check_len(place: &str, len: usize) -> Result<(), DeltaError> {
+    if len > MAX_ITEMS {
+        return Err(DeltaError::Limit {
+            place: place.into(),
+            what: format!("{len} items (limit {MAX_ITEMS})"),
+        });
+    }
+    Ok(())
+}
+
+fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
+    let origin = match wire.origin {
+        None => None,
+        Some((replica, first, count)) => {
+            if replica == 0 {
+                return Err(invalid("origin", "replica id 0"));
+            }
+            if first == 0 || count == 0 {
+                return Err(invalid(
+                    "origin",
+                    format!("dots {first}+{count} (counters start at 1, count >= 1)"),
+                ));
+            }
+            let last = first
+                .checked_add(u64::from(count) - 1)
+                .ok_or_else(|| invalid("origin", "dot counter overflows u64"))?;
+            if count as usize > MAX_ITEMS {
+                return Err(DeltaError::Limit {
+                    place: "origin".into(),
+                    what: format!("{count} dots"),
+                });
+            }
+            Some(Origin {
+                replica: ReplicaId(replica),
+                first,
+                last,
+            })
+        }
+    };
+    let dot = |wire_dot: WireDot, place: &dyn Fn() -> String| -> Result<Dot, DeltaError> {
+        match wire_dot {
+            WireDot::Same(offset) => {
+                let o = origin
+                    .ok_or_else(|| invalid(place(), "relative dot in a delta without origin"))?;
+                let counter = o.first.wrapping_add(offset as u64);
+                if counter == 0
+                    || (offset < 0 && counter >= o.first)
+                    || (offset >= 0 && counter < o.first)
+                {
+                    return Err(invalid(
+                        place(),
+                        format!("relative dot offset {offset} leaves the counter range"),
+                    ));
+                }
+                Ok(Dot::new(o.replica, counter))
+            }
+            WireDot::Other(replica, counter) => {
+                if replica == 0 || counter == 0 {
+                    return Err(invalid(
+                        place(),
+                        format!("dot r{replica}:{counter} (ids and counters start at 1)"),
+                    ));
+                }
+                Ok(Dot::new(ReplicaId(replica), counter))
+            }
+        }
+    };
+
+    check_len("context", wire.vv.len() + wire.cloud.len())?;
+    let mut vv = Vec::with_capacity(wire.vv.len());
+    for (replica, counter) in &wire.vv {
+        if *replica == 0 {
+            return Err(invalid("context version vector", "replica id 0"));
+        }
+        vv.push((ReplicaId(*replica), *counter));
+    }
+    let mut cloud = Vec::with_capacity(wire.cloud.len());
+    for (index, wire_dot) in wire.cloud.iter().enumerate() {
+        cloud.push(dot(*wire_dot, &|| format!("context dot {index}"))?);
+    }
+    let mut ctx = CausalContext::from_parts(vv, cloud);
+    if let Some(o) = origin {
+        for generated in o.dots() {
+            ctx.insert(generated);
+        }
+    }
+
+    let mut store = Store::default();
+    check_len("tombstones", wire.tombstones.len())?;
+    for id in &wire.tombstones {
+        if *id == 0 {
+            return Err(invalid("tombstones", "node id 0"));
+        }
+        store.tombstones.insert(NodeId(*id));
+    }
+
+    let in_ctx = |d: Dot, place: &dyn Fn() -> String| -> Result<(), DeltaError> {
+        if ctx.contains(d) {
+            Ok(())
+        } else {
+            Err(DeltaError::DotOutsideContext {
+                place: place(),
+                dot: d,
+            })
+        }
+    };
+    let read_attrs = |registers: Vec<WireRegister<'_>>,
+                      owner: &dyn Fn() -> String|
+     -> Result<Attrs, DeltaError> {
+        check_len(&owner(), registers.len())?;
+        let mut attrs = Attrs::new();
+        for register in registers {
+            let name = match register.name {
+                WireName::Builtin(code) => {
+                    Dictionary::builtin_attr_name(code).ok_or_else(|| {
+                        invalid(owner(), format!("unknown built-in attribute code {code}"))
+                    })?
+                }
+                WireName::Text(text) => text,
+            };
+            let place = || format!("{} attribute {name:?}", owner());
+            if name.is_empty() || name.len() > crate::dictionary::MAX_NAME_LEN {
+                return Err(DeltaError::Limit {
+                    place: place(),
+                    what: "attribute name length".into(),
+                });
+            }
+            let values = read_entries(register.values, &dot, &in_ctx, &place)?;
+            if attrs.insert(Name::new(name), values).is_some() {
+                return Err(DeltaError::Limit {
+                    place: place(),
+                    what: "attribute listed twice".into(),
+                });
+            }
+        }
+        Ok(attrs)
+    };
+
+    check_len("nodes", wire.nodes.len())?;
+    for node in wire.nodes {
+        let id = node.id;
+        if id == 0 {
+            return Err(invalid("node list", "node id 0"));
+        }
+        let owner = || format!("node {id}");
+        let mut core = Register::default();
+        for (index, entry) in node.core.into_iter().enumerate() {
+            let place = || format!("node {id} core value {index}");
+            let d = dot(entry.dot, &place)?;
+            in_ctx(d, &place)?;
+            let (node_type, name) = entry.value;
+            if node_type.is_empty() || node_type.len() > crate::dictionary::MAX_NAME_LEN {
+                return Err(DeltaError::Limit {
+                    place: place(),
+                    what: "node type length".into(),
+                });
+            }
+            if !crate::replica::valid_node_name(name) {
+                return Err(DeltaError::InvalidNodeName {
+                    place: place(),
+                    name: name.chars().take(64).collect(),
+                });
+            }
+            if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == d) {
+                return Err(DeltaError::Limit {
+                    place: place(),
+                    what: format!("dot {d} listed twice"),
+                });
+            }
+            core.values.push(Entry {
+                dot: d,
+                stamp: Stamp(u64::from_le_bytes(entry.stamp)),
+                value: NodeCore {
+                    node_type: Name::new(node_type),
+                    name: Name::new(name),
+                },
+            });
+        }
+        let attrs = read_attrs(node.attrs, &owner)?;
+        if store
+            .nodes
+            .insert(NodeId(id), NodeEntry { core, attrs })
+            .is_some()
+        {
+            return Err(DeltaError::Limit {
+                place: owner(),
+                what: "node listed twice".into(),
+            });
+        }
+    }
+
+    check_len("edges", wire.edges.len())?;
+    for edge in wire.edges {
+        if edge.from == 0 || edge.to == 0 {
+            return Err(invalid(
+                format!("edge {}->{}", edge.from, edge.to),
+                "node id 0",
+            ));
+        }
+        if edge.edge_type.is_empty() || edge.edge_type.len() > crate::dictionary::MAX_NAME_LEN {
+            return Err(DeltaError::Limit {
+                place: format!("edge {}->{}", edge.from, edge.to),
+                what: "edge type length".into(),
+            });
+        }
+        let key = EdgeKey::new(NodeId(edge.from), NodeId(edge.to), edge.edge_type);
+        let owner = || format!("edge {key}");
+        let presence = read_entries(edge.presence, &dot, &in_ctx, &|| {
+            format!("edge {key} presence")
+        })?;
+        let attrs = read_attrs(edge.attrs, &owner)?;
+        if store
+            .edges
+            .insert(key.clone(), EdgeEntry { presence, attrs })
+            .is_some()
+        {
+            return Err(DeltaError::Limit {
+                place: owner(),
+                what: "edge listed twice".into(),
+            });
+        }
+    }
+
+    Ok(Delta {
+        origin,
+        complete,
+        ctx,
+        store,
+    })
+}
+
+fn read_entries<T>(
+    entries: Vec<WireEntry<T>>,
+    dot: &dyn Fn(WireDot, &dyn Fn() -> String) -> Result<Dot, DeltaError>,
+    in_ctx: &dyn Fn(Dot, &dyn Fn() -> String) -> Result<(), DeltaError>,
+    place: &dyn Fn() -> String,
+) -> Result<Register<T>, DeltaError> {
+    check_len(&place(), entries.len())?;
+    let mut values: SmallVec<[Entry<T>; 1]> = SmallVec::with_capacity(entries.len());
+    for (index, entry) in entries.into_iter().enumerate() {
+        let entry_place = || format!("{} value {index}", place());
+        let d = dot(entry.dot, &entry_place)?;
+        in_ctx(d, &entry_place)?;
+        if values.iter().any(|e| e.dot == d) {
+            return Err(DeltaError::Limit {
+                place: entry_place(),
+                what: format!("dot {d} listed twice"),
+            });
+        }
+        values.push(Entry {
+            dot: d,
+            stamp: Stamp(u64::from_le_bytes(entry.stamp)),
+            value: entry.value,
+        });
+    }
+    Ok(Register { values })
+}

@@ -1,0 +1,1 @@
+//! CORTEX JSON (filled next).

@@ -1,0 +1,4 @@
+//! placeholder replaced below
+/// Kinematics error.
+#[derive(Debug)]
+pub struct KinematicsError;

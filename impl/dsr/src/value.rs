@@ -1,0 +1,487 @@
+//! Attribute values: the 14 CORTEX value types.
+//!
+//! Large payloads (camera images, laser scans, point clouds) live in shared buffers (`bytes::Bytes`, `Arc<[T]>`),
+//! so a value is cloned by reference count, never by copying its contents. Decoding a value from the wire copies
+//! its payload exactly once, into its final buffer; encoding copies it once, into the output buffer.
+
+use std::fmt;
+use std::sync::Arc;
+
+use bytes::Bytes;
+use serde::{Deserialize, Serialize};
+
+/// The type of an attribute value. The discriminants are CORTEX's JSON type codes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[repr(u8)]
+pub enum ValueType {
+    /// UTF-8 text (code 0).
+    String = 0,
+    /// `i32` (code 1).
+    I32 = 1,
+    /// `f32` (code 2).
+    F32 = 2,
+    /// A vector of `f32` (code 3).
+    VecF32 = 3,
+    /// `bool` (code 4).
+    Bool = 4,
+    /// A vector of bytes, e.g. an image (code 5).
+    Bytes = 5,
+    /// `u32` (code 6).
+    U32 = 6,
+    /// `u64` (code 7).
+    U64 = 7,
+    /// `f64` (code 8).
+    F64 = 8,
+    /// A vector of `u64` (code 9).
+    VecU64 = 9,
+    /// `[f32; 2]` (code 10).
+    F32x2 = 10,
+    /// `[f32; 3]` (code 11).
+    F32x3 = 11,
+    /// `[f32; 4]` (code 12).
+    F32x4 = 12,
+    /// `[f32; 6]` (code 13).
+    F32x6 = 13,
+}
+
+impl ValueType {
+    /// Every type, in code order.
+    pub const ALL: [ValueType; 14] = [
+        ValueType::String,
+        ValueType::I32,
+        ValueType::F32,
+        ValueType::VecF32,
+        ValueType::Bool,
+        ValueType::Bytes,
+        ValueType::U32,
+        ValueType::U64,
+        ValueType::F64,
+        ValueType::VecU64,
+        ValueType::F32x2,
+        ValueType::F32x3,
+        ValueType::F32x4,
+        ValueType::F32x6,
+    ];
+
+    /// The CORTEX JSON type code.
+    pub const fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// The type for a CORTEX JSON type code, if the code is known.
+    pub fn from_code(code: u64) -> Option<ValueType> {
+        ValueType::ALL.get(usize::try_from(code).ok()?).copied()
+    }
+
+    /// A short lowercase name, used in error messages.
+    pub const fn name(self) -> &'static str {
+        match self {
+            ValueType::String => "string",
+            ValueType::I32 => "i32",
+            ValueType::F32 => "f32",
+            ValueType::VecF32 => "vec<f32>",
+            ValueType::Bool => "bool",
+            ValueType::Bytes => "vec<u8>",
+            ValueType::U32 => "u32",
+            ValueType::U64 => "u64",
+            ValueType::F64 => "f64",
+            ValueType::VecU64 => "vec<u64>",
+            ValueType::F32x2 => "[f32; 2]",
+            ValueType::F32x3 => "[f32; 3]",
+            ValueType::F32x4 => "[f32; 4]",
+            ValueType::F32x6 => "[f32; 6]",
+        }
+    }
+}
+
+impl fmt::Display for ValueType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// An attribute value.
+///
+/// Equality compares floats by their bits, so a NaN equals itself and `0.0 != -0.0`: two replicas are equal exactly
+/// when they hold the same bits, which is what convergence means.
+#[derive(Clone, Serialize, Deserialize)]
+pub enum Value {
+    /// UTF-8 text.
+    String(Arc<str>),
+    /// A 32-bit signed integer.
+    I32(i32),
+    /// A 32-bit float.
+    F32(f32),
+    /// A vector of 32-bit floats (laser distances, point coordinates, CORTEX's `rt_translation`).
+    VecF32(#[serde(with = "f32_slice")] Arc<[f32]>),
+    /// A boolean.
+    Bool(bool),
+    /// A byte vector (camera images, opaque payloads).
+    Bytes(#[serde(with = "byte_buffer")] Bytes),
+    /// A 32-bit unsigned integer.
+    U32(u32),
+    /// A 64-bit unsigned integer.
+    U64(u64),
+    /// A 64-bit float.
+    F64(f64),
+    /// A vector of 64-bit unsigned integers.
+    VecU64(#[serde(with = "u64_slice")] Arc<[u64]>),
+    /// Two 32-bit floats.
+    F32x2([f32; 2]),
+    /// Three 32-bit floats.
+    F32x3([f32; 3]),
+    /// Four 32-bit floats.
+    F32x4([f32; 4]),
+    /// Six 32-bit floats.
+    F32x6([f32; 6]),
+}
+
+impl Value {
+    /// The value's type.
+    pub fn value_type(&self) -> ValueType {
+        match self {
+            Value::String(_) => ValueType::String,
+            Value::I32(_) => ValueType::I32,
+            Value::F32(_) => ValueType::F32,
+            Value::VecF32(_) => ValueType::VecF32,
+            Value::Bool(_) => ValueType::Bool,
+            Value::Bytes(_) => ValueType::Bytes,
+            Value::U32(_) => ValueType::U32,
+            Value::U64(_) => ValueType::U64,
+            Value::F64(_) => ValueType::F64,
+            Value::VecU64(_) => ValueType::VecU64,
+            Value::F32x2(_) => ValueType::F32x2,
+            Value::F32x3(_) => ValueType::F32x3,
+            Value::F32x4(_) => ValueType::F32x4,
+            Value::F32x6(_) => ValueType::F32x6,
+        }
+    }
+
+    /// Feeds a canonical byte form of the value (type code, then contents; floats as bits) to a hasher.
+    pub(crate) fn hash_into(&self, hasher: &mut blake3::Hasher) {
+        hasher.update(&[self.value_type().code()]);
+        let floats = |hasher: &mut blake3::Hasher, values: &[f32]| {
+            hasher.update(&(values.len() as u64).to_le_bytes());
+            for value in values {
+                hasher.update(&value.to_bits().to_le_bytes());
+            }
+        };
+        match self {
+            Value::String(text) => {
+                hasher.update(&(text.len() as u64).to_le_bytes());
+                hasher.update(text.as_bytes());
+            }
+            Value::I32(value) => {
+                hasher.update(&value.to_le_bytes());
+            }
+            Value::F32(value) => {
+                hasher.update(&value.to_bits().to_le_bytes());
+            }
+            Value::VecF32(values) => floats(hasher, values),
+            Value::Bool(value) => {
+                hasher.update(&[u8::from(*value)]);
+            }
+            Value::Bytes(bytes) => {
+                hasher.update(&(bytes.len() as u64).to_le_bytes());
+                hasher.update(bytes);
+            }
+            Value::U32(value) => {
+                hasher.update(&value.to_le_bytes());
+            }
+            Value::U64(value) => {
+                hasher.update(&value.to_le_bytes());
+            }
+            Value::F64(value) => {
+                hasher.update(&value.to_bits().to_le_bytes());
+            }
+            Value::VecU64(values) => {
+                hasher.update(&(values.len() as u64).to_le_bytes());
+                for value in values.iter() {
+                    hasher.update(&value.to_le_bytes());
+                }
+            }
+            Value::F32x2(values) => floats(hasher, values),
+            Value::F32x3(values) => floats(hasher, values),
+            Value::F32x4(values) => floats(hasher, values),
+            Value::F32x6(values) => floats(hasher, values),
+        }
+    }
+
+    /// The payload size in bytes (contents only), for accounting.
+    pub fn payload_len(&self) -> usize {
+        match self {
+            Value::String(text) => text.len(),
+            Value::I32(_) | Value::F32(_) | Value::U32(_) => 4,
+            Value::Bool(_) => 1,
+            Value::U64(_) | Value::F64(_) | Value::F32x2(_) => 8,
+            Value::VecF32(values) => values.len() * 4,
+            Value::Bytes(bytes) => bytes.len(),
+            Value::VecU64(values) => values.len() * 8,
+            Value::F32x3(_) => 12,
+            Value::F32x4(_) => 16,
+            Value::F32x6(_) => 24,
+        }
+    }
+}
+
+fn f32_bits_eq(a: &[f32], b: &[f32]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+impl PartialEq for Value {
+    fn eq(&self, other: &Value) -> bool {
+        match (self, other) {
+            (Value::String(a), Value::String(b)) => a == b,
+            (Value::I32(a), Value::I32(b)) => a == b,
+            (Value::F32(a), Value::F32(b)) => a.to_bits() == b.to_bits(),
+            (Value::VecF32(a), Value::VecF32(b)) => f32_bits_eq(a, b),
+            (Value::Bool(a), Value::Bool(b)) => a == b,
+            (Value::Bytes(a), Value::Bytes(b)) => a == b,
+            (Value::U32(a), Value::U32(b)) => a == b,
+            (Value::U64(a), Value::U64(b)) => a == b,
+            (Value::F64(a), Value::F64(b)) => a.to_bits() == b.to_bits(),
+            (Value::VecU64(a), Value::VecU64(b)) => a == b,
+            (Value::F32x2(a), Value::F32x2(b)) => f32_bits_eq(a, b),
+            (Value::F32x3(a), Value::F32x3(b)) => f32_bits_eq(a, b),
+            (Value::F32x4(a), Value::F32x4(b)) => f32_bits_eq(a, b),
+            (Value::F32x6(a), Value::F32x6(b)) => f32_bits_eq(a, b),
+            _ => false,
+        }
+    }
+}
+
+impl Eq for Value {}
+
+impl std::hash::Hash for Value {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        let mut hasher = blake3::Hasher::new();
+        self.hash_into(&mut hasher);
+        state.write(hasher.finalize().as_bytes());
+    }
+}
+
+impl fmt::Debug for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        const SHOWN: usize = 8;
+        fn list<T: fmt::Debug>(
+            f: &mut fmt::Formatter<'_>,
+            name: &str,
+            values: &[T],
+        ) -> fmt::Result {
+            if values.len() <= SHOWN {
+                write!(f, "{name}({values:?})")
+            } else {
+                write!(f, "{name}({:?}… {} items)", &values[..SHOWN], values.len())
+            }
+        }
+        match self {
+            Value::String(text) => write!(f, "String({text:?})"),
+            Value::I32(value) => write!(f, "I32({value})"),
+            Value::F32(value) => write!(f, "F32({value:?})"),
+            Value::VecF32(values) => list(f, "VecF32", values),
+            Value::Bool(value) => write!(f, "Bool({value})"),
+            Value::Bytes(bytes) => list(f, "Bytes", bytes),
+            Value::U32(value) => write!(f, "U32({value})"),
+            Value::U64(value) => write!(f, "U64({value})"),
+            Value::F64(value) => write!(f, "F64({value:?})"),
+            Value::VecU64(values) => list(f, "VecU64", values),
+            Value::F32x2(values) => write!(f, "F32x2({values:?})"),
+            Value::F32x3(values) => write!(f, "F32x3({values:?})"),
+            Value::F32x4(values) => write!(f, "F32x4({values:?})"),
+            Value::F32x6(values) => write!(f, "F32x6({values:?})"),
+        }
+    }
+}
+
+/// A Rust type that maps to one attribute value type; typed attribute keys ([`crate::AttrKey`]) use it so that
+/// writing a value of the wrong type does not compile.
+pub trait AttrType: Sized {
+    /// The value type this Rust type maps to.
+    const TYPE: ValueType;
+    /// Wraps the value.
+    fn into_value(self) -> Value;
+    /// Unwraps a value of this type (cheap: shared buffers are reference-counted).
+    fn from_value(value: &Value) -> Option<Self>;
+}
+
+macro_rules! attr_type {
+    ($rust:ty, $variant:ident, $copy:expr) => {
+        impl AttrType for $rust {
+            const TYPE: ValueType = ValueType::$variant;
+            fn into_value(self) -> Value {
+                Value::$variant(self)
+            }
+            fn from_value(value: &Value) -> Option<Self> {
+                match value {
+                    Value::$variant(inner) => Some($copy(inner)),
+                    _ => None,
+                }
+            }
+        }
+    };
+}
+
+attr_type!(Arc<str>, String, Arc::clone);
+attr_type!(i32, I32, |v: &i32| *v);
+attr_type!(f32, F32, |v: &f32| *v);
+attr_type!(Arc<[f32]>, VecF32, Arc::clone);
+attr_type!(bool, Bool, |v: &bool| *v);
+attr_type!(Bytes, Bytes, Bytes::clone);
+attr_type!(u32, U32, |v: &u32| *v);
+attr_type!(u64, U64, |v: &u64| *v);
+attr_type!(f64, F64, |v: &f64| *v);
+attr_type!(Arc<[u64]>, VecU64, Arc::clone);
+attr_type!([f32; 2], F32x2, |v: &[f32; 2]| *v);
+attr_type!([f32; 3], F32x3, |v: &[f32; 3]| *v);
+attr_type!([f32; 4], F32x4, |v: &[f32; 4]| *v);
+attr_type!([f32; 6], F32x6, |v: &[f32; 6]| *v);
+
+impl From<&str> for Value {
+    fn from(text: &str) -> Self {
+        Value::String(Arc::from(text))
+    }
+}
+
+macro_rules! value_from {
+    ($($rust:ty),*) => {$(
+        impl From<$rust> for Value {
+            fn from(value: $rust) -> Self {
+                value.into_value()
+            }
+        }
+    )*};
+}
+value_from!(
+    i32, f32, bool, u32, u64, f64, [f32; 2], [f32; 3], [f32; 4], [f32; 6], Bytes
+);
+
+impl From<Vec<f32>> for Value {
+    fn from(values: Vec<f32>) -> Self {
+        Value::VecF32(Arc::from(values))
+    }
+}
+
+impl From<Vec<u64>> for Value {
+    fn from(values: Vec<u64>) -> Self {
+        Value::VecU64(Arc::from(values))
+    }
+}
+
+/// Encodes `Arc<[f32]>` as one byte string of little-endian floats, so decoding fills the final buffer in one copy.
+mod f32_slice {
+    use super::*;
+
+    pub fn serialize<S: serde::Serializer>(
+        values: &Arc<[f32]>,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        let mut bytes = Vec::with_capacity(values.len() * 4);
+        for value in values.iter() {
+            bytes.extend_from_slice(&value.to_le_bytes());
+        }
+        serializer.serialize_bytes(&bytes)
+    }
+
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Arc<[f32]>, D::Error> {
+        deserializer.deserialize_bytes(Visitor)
+    }
+
+    struct Visitor;
+
+    impl serde::de::Visitor<'_> for Visitor {
+        type Value = Arc<[f32]>;
+        fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            f.write_str("a byte string of little-endian f32 values")
+        }
+        fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[f32]>, E> {
+            if bytes.len() % 4 != 0 {
+                return Err(E::custom(format!(
+                    "f32 vector of {} bytes is not a multiple of 4",
+                    bytes.len()
+                )));
+            }
+            Ok(bytes
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect())
+        }
+    }
+}
+
+/// Encodes `Arc<[u64]>` as one byte string of little-endian integers.
+mod u64_slice {
+    use super::*;
+
+    pub fn serialize<S: serde::Serializer>(
+        values: &Arc<[u64]>,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        let mut bytes = Vec::with_capacity(values.len() * 8);
+        for value in values.iter() {
+            bytes.extend_from_slice(&value.to_le_bytes());
+        }
+        serializer.serialize_bytes(&bytes)
+    }
+
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Arc<[u64]>, D::Error> {
+        deserializer.deserialize_bytes(Visitor)
+    }
+
+    struct Visitor;
+
+    impl serde::de::Visitor<'_> for Visitor {
+        type Value = Arc<[u64]>;
+        fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            f.write_str("a byte string of little-endian u64 values")
+        }
+        fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[u64]>, E> {
+            if bytes.len() % 8 != 0 {
+                return Err(E::custom(format!(
+                    "u64 vector of {} bytes is not a multiple of 8",
+                    bytes.len()
+                )));
+            }
+            Ok(bytes
+                .chunks_exact(8)
+                .map(|c| u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+                .collect())
+        }
+    }
+}
+
+/// Encodes `Bytes` as one byte string; decoding copies it once into a fresh buffer.
+mod byte_buffer {
+    use super::*;
+
+    pub fn serialize<S: serde::Serializer>(
+        bytes: &Bytes,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        serializer.serialize_bytes(bytes)
+    }
+
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Bytes, D::Error> {
+        deserializer.deserialize_bytes(Visitor)
+    }
+
+    struct Visitor;
+
+    impl serde::de::Visitor<'_> for Visitor {
+        type Value = Bytes;
+        fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            f.write_str("a byte string")
+        }
+        fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Bytes, E> {
+            Ok(Bytes::copy_from_slice(bytes))
+        }
+        fn visit_byte_buf<E: serde::de::Error>(self, bytes: Vec<u8>) -> Result<Bytes, E> {
+            Ok(Bytes::from(bytes))
+        }
+    }
+}

@@ -1,0 +1,207 @@
+//! Hand-written scenarios for the documented semantics, one claim per test.
+
+use dsr::{Change, Delta, EdgeKey, NewNode, NodeId, OpError, Replica, ReplicaId, Value, attrs};
+
+fn pair() -> (Replica, Replica) {
+    (Replica::new(ReplicaId(1)), Replica::new(ReplicaId(2)))
+}
+
+fn ship(delta: &Delta, to: &mut Replica) {
+    let decoded = Delta::decode(&delta.encode()).expect("decodes");
+    assert_eq!(&decoded, delta, "wire round trip");
+    to.apply(&decoded).expect("applies");
+}
+
+#[test]
+fn deltas_converge_in_any_order_with_duplicates() {
+    let (mut a, mut b) = pair();
+    let (w, d1) = a.insert_node(10, NewNode::new("world", "world")).unwrap();
+    let (r, d2) = a
+        .insert_node(11, NewNode::new("omnirobot", "robot").with_attr("level", 1))
+        .unwrap();
+    let (_, d3) = a.insert_edge(12, w, r, "RT", vec![]).unwrap();
+    let d4 = a.set_attr(13, r, attrs::LEVEL, 2).unwrap();
+    for d in [&d4, &d3, &d3, &d2, &d1, &d4] {
+        ship(d, &mut b);
+    }
+    assert_eq!(a.digest(), b.digest());
+    assert_eq!(b.node(r).unwrap().get(attrs::LEVEL), Some(2));
+    assert_eq!(b.edge_count(), 1);
+}
+
+#[test]
+fn deleted_node_is_not_resurrected_by_a_concurrent_write() {
+    let (mut a, mut b) = pair();
+    let (n, d1) = a.insert_node(1, NewNode::new("object", "cup")).unwrap();
+    ship(&d1, &mut b);
+    let del = a.delete_node(2, n).unwrap();
+    let write = b.set_attr(2, n, attrs::LEVEL, 5).unwrap();
+    ship(&write, &mut a);
+    ship(&del, &mut b);
+    assert!(a.node(n).is_none() && b.node(n).is_none());
+    assert_eq!(a.digest(), b.digest());
+    assert!(matches!(
+        a.insert_node(3, NewNode::new("object", "cup").with_id(n)),
+        Err(OpError::IdTaken(_))
+    ));
+}
+
+#[test]
+fn concurrent_edge_insert_wins_over_delete() {
+    let (mut a, mut b) = pair();
+    let (x, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let (y, d2) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
+    let (key, d3) = a.insert_edge(3, x, y, "in", vec![]).unwrap();
+    for d in [&d1, &d2, &d3] {
+        ship(d, &mut b);
+    }
+    let del = a.delete_edge(4, &key).unwrap();
+    let del_b = b.delete_edge(4, &key).unwrap();
+    let (_, re_add) = b.insert_edge(5, x, y, "in", vec![]).unwrap();
+    ship(&del, &mut b);
+    ship(&del_b, &mut a);
+    ship(&re_add, &mut a);
+    assert!(a.edge(&key).is_some(), "add wins");
+    assert_eq!(a.digest(), b.digest());
+}
+
+#[test]
+fn edge_added_to_a_concurrently_deleted_node_never_shows() {
+    let (mut a, mut b) = pair();
+    let (x, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let (y, d2) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
+    ship(&d1, &mut b);
+    ship(&d2, &mut b);
+    let del = a.delete_node(3, y).unwrap();
+    let (key, add) = b.insert_edge(3, x, y, "in", vec![]).unwrap();
+    ship(&add, &mut a);
+    ship(&del, &mut b);
+    assert!(a.edge(&key).is_none() && b.edge(&key).is_none());
+    assert_eq!(a.digest(), b.digest());
+    a.check_invariants().unwrap();
+    b.check_invariants().unwrap();
+}
+
+#[test]
+fn edge_before_its_nodes_is_kept_and_shown_later() {
+    let (mut a, mut b) = pair();
+    let (x, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let (y, d2) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
+    let (key, d3) = a
+        .insert_edge(3, x, y, "in", vec![("level".into(), Value::I32(3))])
+        .unwrap();
+    ship(&d3, &mut b);
+    assert_eq!(b.edge_count(), 0);
+    ship(&d1, &mut b);
+    assert_eq!(b.edge_count(), 0);
+    ship(&d2, &mut b);
+    assert_eq!(b.edge(&key).unwrap().attr("level"), Some(&Value::I32(3)));
+}
+
+#[test]
+fn concurrent_writes_are_kept_and_one_wins_everywhere() {
+    let (mut a, mut b) = pair();
+    let (n, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    ship(&d1, &mut b);
+    let wa = a.set_attr(100, n, attrs::LEVEL, 1).unwrap();
+    let wb = b.set_attr(100, n, attrs::LEVEL, 2).unwrap();
+    ship(&wa, &mut b);
+    ship(&wb, &mut a);
+    assert_eq!(a.node(n).unwrap().concurrent("level").len(), 2);
+    // Equal stamps: the higher replica id wins.
+    assert_eq!(a.node(n).unwrap().get(attrs::LEVEL), Some(2));
+    assert_eq!(a.digest(), b.digest());
+    // A later write that has seen both supersedes both.
+    let w = a.set_attr(200, n, attrs::LEVEL, 3).unwrap();
+    ship(&w, &mut b);
+    assert_eq!(b.node(n).unwrap().concurrent("level").len(), 1);
+}
+
+#[test]
+fn concurrent_same_name_inserts_resolve_identically() {
+    let (mut a, mut b) = pair();
+    let (na, da) = a.insert_node(5, NewNode::new("person", "alice")).unwrap();
+    let (nb, db) = b.insert_node(7, NewNode::new("person", "alice")).unwrap();
+    ship(&da, &mut b);
+    ship(&db, &mut a);
+    assert_eq!(
+        a.node_by_name("alice").unwrap().id(),
+        na,
+        "earliest stamp keeps the name"
+    );
+    let renamed = format!("alice#{nb}");
+    assert_eq!(a.node_by_name(&renamed).unwrap().id(), nb);
+    assert_eq!(a.digest(), b.digest());
+    a.check_invariants().unwrap();
+    assert!(matches!(
+        a.insert_node(9, NewNode::new("person", "alice")),
+        Err(OpError::NameTaken(_))
+    ));
+}
+
+#[test]
+fn anti_entropy_recovers_a_lost_delta() {
+    let (mut a, mut b) = pair();
+    let (n, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let _lost = a.set_attr(2, n, attrs::LEVEL, 1).unwrap();
+    let d3 = a.set_attr(3, n, attrs::POS_X, 1.5).unwrap();
+    ship(&d1, &mut b);
+    ship(&d3, &mut b);
+    match a.missing_for(b.context()) {
+        dsr::Missing::Deltas(deltas) => {
+            assert_eq!(deltas.len(), 1);
+            for d in deltas {
+                ship(&d, &mut b);
+            }
+        }
+        other => panic!("expected deltas, got {other:?}"),
+    }
+    assert_eq!(a.digest(), b.digest());
+    assert!(matches!(a.missing_for(b.context()), dsr::Missing::UpToDate));
+}
+
+#[test]
+fn snapshot_brings_a_late_joiner_up_to_date() {
+    let (mut a, mut b) = pair();
+    let (n, _) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let (m, _) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
+    a.insert_edge(3, n, m, "in", vec![]).unwrap();
+    a.delete_node(4, m).unwrap();
+    ship(&a.snapshot(), &mut b);
+    assert_eq!(a.digest(), b.digest());
+    assert!(b.is_deleted(m));
+}
+
+#[test]
+fn change_events_report_local_and_remote_changes() {
+    let (mut a, mut b) = pair();
+    b.set_change_tracking(true);
+    let (x, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let (y, d2) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
+    let (key, d3) = a.insert_edge(3, x, y, "in", vec![]).unwrap();
+    ship(&d3, &mut b);
+    ship(&d1, &mut b);
+    ship(&d2, &mut b);
+    let changes: Vec<Change> = b.drain_changes().into_iter().map(|e| e.change).collect();
+    assert_eq!(
+        changes,
+        vec![
+            Change::NodeInserted { id: x },
+            Change::NodeInserted { id: y },
+            Change::EdgeInserted { key: key.clone() },
+        ]
+    );
+    let d = a.delete_node(4, y).unwrap();
+    ship(&d, &mut b);
+    let changes: Vec<Change> = b.drain_changes().into_iter().map(|e| e.change).collect();
+    assert_eq!(
+        changes,
+        vec![
+            Change::NodeDeleted { id: y },
+            Change::EdgeDeleted {
+                key: EdgeKey::new(x, y, "in")
+            }
+        ]
+    );
+    let _ = NodeId(0);
+}
