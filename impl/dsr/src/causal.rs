@@ -60,10 +60,7 @@ impl CausalContext {
 
     /// The highest counter of `replica` in the set (including out-of-order dots).
     pub fn max_counter(&self, replica: ReplicaId) -> u64 {
-        let cloud_max = self
-            .cloud
-            .range(Dot::new(replica, 0)..=Dot::new(replica, u64::MAX))
-            .next_back();
+        let cloud_max = self.cloud.range(Dot::new(replica, 0)..=Dot::new(replica, u64::MAX)).next_back();
         cloud_max.map_or(self.version(replica), |dot| dot.counter)
     }
 
@@ -123,8 +120,7 @@ impl CausalContext {
     pub fn includes(&self, other: &CausalContext) -> bool {
         other.vv.iter().all(|&(replica, counter)| {
             let mine = self.version(replica);
-            counter <= mine
-                || (mine + 1..=counter).all(|c| self.cloud.contains(&Dot::new(replica, c)))
+            counter <= mine || (mine + 1..=counter).all(|c| self.cloud.contains(&Dot::new(replica, c)))
         }) && other.cloud.iter().all(|dot| self.contains(*dot))
     }
 
@@ -171,10 +167,7 @@ impl CausalContext {
     /// Every dot in the set, in order. Meant for small contexts (deltas); a version vector entry expands to its
     /// whole range.
     pub fn dots(&self) -> impl Iterator<Item = Dot> + '_ {
-        let ranges = self
-            .vv
-            .iter()
-            .flat_map(|&(replica, counter)| (1..=counter).map(move |c| Dot::new(replica, c)));
+        let ranges = self.vv.iter().flat_map(|&(replica, counter)| (1..=counter).map(move |c| Dot::new(replica, c)));
         let mut all: Vec<Dot> = ranges.chain(self.cloud.iter().copied()).collect();
         all.sort_unstable();
         all.into_iter()
@@ -202,10 +195,7 @@ impl CausalContext {
         vv.sort_unstable();
         for (replica, counter) in vv {
             if counter > 0 {
-                ctx.merge(&CausalContext {
-                    vv: vec![(replica, counter)],
-                    cloud: BTreeSet::new(),
-                });
+                ctx.merge(&CausalContext { vv: vec![(replica, counter)], cloud: BTreeSet::new() });
             }
         }
         for dot in cloud {
@@ -216,11 +206,7 @@ impl CausalContext {
 
     fn drop_covered_cloud(&mut self, index: usize) {
         let (replica, counter) = self.vv[index];
-        let covered: Vec<Dot> = self
-            .cloud
-            .range(Dot::new(replica, 0)..=Dot::new(replica, counter))
-            .copied()
-            .collect();
+        let covered: Vec<Dot> = self.cloud.range(Dot::new(replica, 0)..=Dot::new(replica, counter)).copied().collect();
         for dot in covered {
             self.cloud.remove(&dot);
         }

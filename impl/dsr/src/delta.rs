@@ -87,45 +87,19 @@ impl Delta {
     /// Bytes of attribute payload carried (contents only).
     pub fn payload_bytes(&self) -> usize {
         let attrs = |attrs: &Attrs| -> usize {
-            attrs
-                .values()
-                .flat_map(|r| r.values.iter())
-                .map(|e| e.value.payload_len())
-                .sum()
+            attrs.values().flat_map(|r| r.values.iter()).map(|e| e.value.payload_len()).sum()
         };
-        self.store
-            .nodes
-            .values()
-            .map(|n| attrs(&n.attrs))
-            .sum::<usize>()
-            + self
-                .store
-                .edges
-                .values()
-                .map(|e| attrs(&e.attrs))
-                .sum::<usize>()
+        self.store.nodes.values().map(|n| attrs(&n.attrs)).sum::<usize>()
+            + self.store.edges.values().map(|e| attrs(&e.attrs)).sum::<usize>()
     }
 
     /// The highest stamp carried (for the hybrid logical clock).
     pub(crate) fn max_stamp(&self) -> Stamp {
-        let attrs = |attrs: &Attrs| {
-            attrs
-                .values()
-                .flat_map(|r| r.values.iter().map(|e| e.stamp))
-                .max()
-        };
-        let nodes = self
-            .store
-            .nodes
-            .values()
-            .flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
-        let edges = self.store.edges.values().flat_map(|e| {
-            e.presence
-                .values
-                .iter()
-                .map(|p| p.stamp)
-                .chain(attrs(&e.attrs))
-        });
+        let attrs = |attrs: &Attrs| attrs.values().flat_map(|r| r.values.iter().map(|e| e.stamp)).max();
+        let nodes =
+            self.store.nodes.values().flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
+        let edges =
+            self.store.edges.values().flat_map(|e| e.presence.values.iter().map(|p| p.stamp).chain(attrs(&e.attrs)));
         nodes.chain(edges).max().unwrap_or_default()
     }
 
@@ -150,8 +124,7 @@ impl Delta {
     pub fn encode_into(&self, out: &mut Vec<u8>) {
         let wire = to_wire(self);
         out.push((WIRE_VERSION << 1) | u8::from(self.complete));
-        let encoded = postcard::to_extend(&wire, std::mem::take(out))
-            .expect("encoding into a Vec cannot fail");
+        let encoded = postcard::to_extend(&wire, std::mem::take(out)).expect("encoding into a Vec cannot fail");
         *out = encoded;
     }
 
@@ -161,24 +134,17 @@ impl Delta {
     /// [`DeltaError`] saying what is wrong and where: bad bytes, an unknown version, zero ids, a value whose dot is
     /// not in the context, an invalid name, or a list over [`MAX_ITEMS`].
     pub fn decode(bytes: &[u8]) -> Result<Delta, DeltaError> {
-        let (&header, body) = bytes
-            .split_first()
-            .ok_or_else(|| DeltaError::Encoding("empty input (no header byte)".into()))?;
+        let (&header, body) =
+            bytes.split_first().ok_or_else(|| DeltaError::Encoding("empty input (no header byte)".into()))?;
         let version = header >> 1;
         if version != WIRE_VERSION {
-            return Err(DeltaError::Version {
-                found: version,
-                supported: WIRE_VERSION,
-            });
+            return Err(DeltaError::Version { found: version, supported: WIRE_VERSION });
         }
         let complete = header & 1 == 1;
         let (wire, rest): (WireDelta<'_>, &[u8]) = postcard::take_from_bytes(body)
             .map_err(|e| DeltaError::Encoding(format!("{e} (body of {} bytes)", body.len())))?;
         if !rest.is_empty() {
-            return Err(DeltaError::Encoding(format!(
-                "{} trailing bytes after the delta",
-                rest.len()
-            )));
+            return Err(DeltaError::Encoding(format!("{} trailing bytes after the delta", rest.len())));
         }
         from_wire(wire, complete)
     }
@@ -247,19 +213,15 @@ struct WireEntry<T> {
 
 fn wire_dot(dot: Dot, origin: Option<Origin>) -> WireDot {
     match origin {
-        Some(o) if o.replica == dot.replica => {
-            WireDot::Same(dot.counter.wrapping_sub(o.first) as i64)
-        }
+        Some(o) if o.replica == dot.replica => WireDot::Same(dot.counter.wrapping_sub(o.first) as i64),
         _ => WireDot::Other(dot.replica.0, dot.counter),
     }
 }
 
 fn to_wire(delta: &Delta) -> WireDelta<'_> {
     let origin = delta.origin;
-    let generated = |dot: &Dot| {
-        origin
-            .is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter))
-    };
+    let generated =
+        |dot: &Dot| origin.is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter));
     // The generated dots are implied by `origin`; the rest of the context travels explicitly.
     let mut vv = Vec::new();
     let mut cloud = Vec::new();
@@ -283,11 +245,7 @@ fn to_wire(delta: &Delta) -> WireDelta<'_> {
         register
             .values
             .iter()
-            .map(|e| WireEntry {
-                dot: wire_dot(e.dot, origin),
-                stamp: e.stamp.0.to_le_bytes(),
-                value: e.value.clone(),
-            })
+            .map(|e| WireEntry { dot: wire_dot(e.dot, origin), stamp: e.stamp.0.to_le_bytes(), value: e.value.clone() })
             .collect()
     };
     fn attrs<'d>(
@@ -341,11 +299,7 @@ fn to_wire(delta: &Delta) -> WireDelta<'_> {
                     .presence
                     .values
                     .iter()
-                    .map(|e| WireEntry {
-                        dot: wire_dot(e.dot, origin),
-                        stamp: e.stamp.0.to_le_bytes(),
-                        value: (),
-                    })
+                    .map(|e| WireEntry { dot: wire_dot(e.dot, origin), stamp: e.stamp.0.to_le_bytes(), value: () })
                     .collect(),
                 attrs: attrs(&edge.attrs, &entries),
             })
@@ -354,18 +308,12 @@ fn to_wire(delta: &Delta) -> WireDelta<'_> {
 }
 
 fn invalid(place: impl Into<String>, what: impl Into<String>) -> DeltaError {
-    DeltaError::InvalidId {
-        place: place.into(),
-        what: what.into(),
-    }
+    DeltaError::InvalidId { place: place.into(), what: what.into() }
 }
 
 fn check_len(place: &str, len: usize) -> Result<(), DeltaError> {
     if len > MAX_ITEMS {
-        return Err(DeltaError::Limit {
-            place: place.into(),
-            what: format!("{len} items (limit {MAX_ITEMS})"),
-        });
+        return Err(DeltaError::Limit { place: place.into(), what: format!("{len} items (limit {MAX_ITEMS})") });
     }
     Ok(())
 }
@@ -378,50 +326,30 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
                 return Err(invalid("origin", "replica id 0"));
             }
             if first == 0 || count == 0 {
-                return Err(invalid(
-                    "origin",
-                    format!("dots {first}+{count} (counters start at 1, count >= 1)"),
-                ));
+                return Err(invalid("origin", format!("dots {first}+{count} (counters start at 1, count >= 1)")));
             }
             let last = first
                 .checked_add(u64::from(count) - 1)
                 .ok_or_else(|| invalid("origin", "dot counter overflows u64"))?;
             if count as usize > MAX_ITEMS {
-                return Err(DeltaError::Limit {
-                    place: "origin".into(),
-                    what: format!("{count} dots"),
-                });
+                return Err(DeltaError::Limit { place: "origin".into(), what: format!("{count} dots") });
             }
-            Some(Origin {
-                replica: ReplicaId(replica),
-                first,
-                last,
-            })
+            Some(Origin { replica: ReplicaId(replica), first, last })
         }
     };
     let dot = |wire_dot: WireDot, place: &dyn Fn() -> String| -> Result<Dot, DeltaError> {
         match wire_dot {
             WireDot::Same(offset) => {
-                let o = origin
-                    .ok_or_else(|| invalid(place(), "relative dot in a delta without origin"))?;
+                let o = origin.ok_or_else(|| invalid(place(), "relative dot in a delta without origin"))?;
                 let counter = o.first.wrapping_add(offset as u64);
-                if counter == 0
-                    || (offset < 0 && counter >= o.first)
-                    || (offset >= 0 && counter < o.first)
-                {
-                    return Err(invalid(
-                        place(),
-                        format!("relative dot offset {offset} leaves the counter range"),
-                    ));
+                if counter == 0 || (offset < 0 && counter >= o.first) || (offset >= 0 && counter < o.first) {
+                    return Err(invalid(place(), format!("relative dot offset {offset} leaves the counter range")));
                 }
                 Ok(Dot::new(o.replica, counter))
             }
             WireDot::Other(replica, counter) => {
                 if replica == 0 || counter == 0 {
-                    return Err(invalid(
-                        place(),
-                        format!("dot r{replica}:{counter} (ids and counters start at 1)"),
-                    ));
+                    return Err(invalid(place(), format!("dot r{replica}:{counter} (ids and counters start at 1)")));
                 }
                 Ok(Dot::new(ReplicaId(replica), counter))
             }
@@ -457,42 +385,24 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
     }
 
     let in_ctx = |d: Dot, place: &dyn Fn() -> String| -> Result<(), DeltaError> {
-        if ctx.contains(d) {
-            Ok(())
-        } else {
-            Err(DeltaError::DotOutsideContext {
-                place: place(),
-                dot: d,
-            })
-        }
+        if ctx.contains(d) { Ok(()) } else { Err(DeltaError::DotOutsideContext { place: place(), dot: d }) }
     };
-    let read_attrs = |registers: Vec<WireRegister<'_>>,
-                      owner: &dyn Fn() -> String|
-     -> Result<Attrs, DeltaError> {
+    let read_attrs = |registers: Vec<WireRegister<'_>>, owner: &dyn Fn() -> String| -> Result<Attrs, DeltaError> {
         check_len(&owner(), registers.len())?;
         let mut attrs = Attrs::new();
         for register in registers {
             let name = match register.name {
-                WireName::Builtin(code) => {
-                    Dictionary::builtin_attr_name(code).ok_or_else(|| {
-                        invalid(owner(), format!("unknown built-in attribute code {code}"))
-                    })?
-                }
+                WireName::Builtin(code) => Dictionary::builtin_attr_name(code)
+                    .ok_or_else(|| invalid(owner(), format!("unknown built-in attribute code {code}")))?,
                 WireName::Text(text) => text,
             };
             let place = || format!("{} attribute {name:?}", owner());
             if name.is_empty() || name.len() > crate::dictionary::MAX_NAME_LEN {
-                return Err(DeltaError::Limit {
-                    place: place(),
-                    what: "attribute name length".into(),
-                });
+                return Err(DeltaError::Limit { place: place(), what: "attribute name length".into() });
             }
             let values = read_entries(register.values, &dot, &in_ctx, &place)?;
             if attrs.insert(Name::new(name), values).is_some() {
-                return Err(DeltaError::Limit {
-                    place: place(),
-                    what: "attribute listed twice".into(),
-                });
+                return Err(DeltaError::Limit { place: place(), what: "attribute listed twice".into() });
             }
         }
         Ok(attrs)
@@ -512,52 +422,31 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
             in_ctx(d, &place)?;
             let (node_type, name) = entry.value;
             if node_type.is_empty() || node_type.len() > crate::dictionary::MAX_NAME_LEN {
-                return Err(DeltaError::Limit {
-                    place: place(),
-                    what: "node type length".into(),
-                });
+                return Err(DeltaError::Limit { place: place(), what: "node type length".into() });
             }
             if !crate::replica::valid_node_name(name) {
-                return Err(DeltaError::InvalidNodeName {
-                    place: place(),
-                    name: name.chars().take(64).collect(),
-                });
+                return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
             }
             if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == d) {
-                return Err(DeltaError::Limit {
-                    place: place(),
-                    what: format!("dot {d} listed twice"),
-                });
+                return Err(DeltaError::Limit { place: place(), what: format!("dot {d} listed twice") });
             }
             core.values.push(Entry {
                 dot: d,
                 stamp: Stamp(u64::from_le_bytes(entry.stamp)),
-                value: NodeCore {
-                    node_type: Name::new(node_type),
-                    name: Name::new(name),
-                },
+                value: NodeCore { node_type: Name::new(node_type), name: Name::new(name) },
             });
         }
+        core.values.sort_unstable_by_key(|entry| entry.dot);
         let attrs = read_attrs(node.attrs, &owner)?;
-        if store
-            .nodes
-            .insert(NodeId(id), NodeEntry { core, attrs })
-            .is_some()
-        {
-            return Err(DeltaError::Limit {
-                place: owner(),
-                what: "node listed twice".into(),
-            });
+        if store.nodes.insert(NodeId(id), NodeEntry { core, attrs }).is_some() {
+            return Err(DeltaError::Limit { place: owner(), what: "node listed twice".into() });
         }
     }
 
     check_len("edges", wire.edges.len())?;
     for edge in wire.edges {
         if edge.from == 0 || edge.to == 0 {
-            return Err(invalid(
-                format!("edge {}->{}", edge.from, edge.to),
-                "node id 0",
-            ));
+            return Err(invalid(format!("edge {}->{}", edge.from, edge.to), "node id 0"));
         }
         if edge.edge_type.is_empty() || edge.edge_type.len() > crate::dictionary::MAX_NAME_LEN {
             return Err(DeltaError::Limit {
@@ -567,28 +456,14 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
         }
         let key = EdgeKey::new(NodeId(edge.from), NodeId(edge.to), edge.edge_type);
         let owner = || format!("edge {key}");
-        let presence = read_entries(edge.presence, &dot, &in_ctx, &|| {
-            format!("edge {key} presence")
-        })?;
+        let presence = read_entries(edge.presence, &dot, &in_ctx, &|| format!("edge {key} presence"))?;
         let attrs = read_attrs(edge.attrs, &owner)?;
-        if store
-            .edges
-            .insert(key.clone(), EdgeEntry { presence, attrs })
-            .is_some()
-        {
-            return Err(DeltaError::Limit {
-                place: owner(),
-                what: "edge listed twice".into(),
-            });
+        if store.edges.insert(key.clone(), EdgeEntry { presence, attrs }).is_some() {
+            return Err(DeltaError::Limit { place: owner(), what: "edge listed twice".into() });
         }
     }
 
-    Ok(Delta {
-        origin,
-        complete,
-        ctx,
-        store,
-    })
+    Ok(Delta { origin, complete, ctx, store })
 }
 
 fn read_entries<T>(
@@ -604,16 +479,10 @@ fn read_entries<T>(
         let d = dot(entry.dot, &entry_place)?;
         in_ctx(d, &entry_place)?;
         if values.iter().any(|e| e.dot == d) {
-            return Err(DeltaError::Limit {
-                place: entry_place(),
-                what: format!("dot {d} listed twice"),
-            });
+            return Err(DeltaError::Limit { place: entry_place(), what: format!("dot {d} listed twice") });
         }
-        values.push(Entry {
-            dot: d,
-            stamp: Stamp(u64::from_le_bytes(entry.stamp)),
-            value: entry.value,
-        });
+        values.push(Entry { dot: d, stamp: Stamp(u64::from_le_bytes(entry.stamp)), value: entry.value });
     }
+    values.sort_unstable_by_key(|entry| entry.dot);
     Ok(Register { values })
 }

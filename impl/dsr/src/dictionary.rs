@@ -50,10 +50,7 @@ impl<T: AttrType> AttrKey<T> {
     /// A typed key for `name`. Keys of names outside the built-in table must be declared in the replica's
     /// dictionary ([`Dictionary::declare_attr`]) before use.
     pub const fn new(name: &'static str) -> Self {
-        AttrKey {
-            name,
-            _type: PhantomData,
-        }
+        AttrKey { name, _type: PhantomData }
     }
 
     /// The attribute name.
@@ -248,28 +245,16 @@ impl Dictionary {
     /// The built-in table; unknown names are rejected.
     pub fn builtin() -> Self {
         Dictionary {
-            attrs: BUILTIN_ATTRIBUTES
-                .iter()
-                .map(|(name, ty)| (Name::new(name), *ty))
-                .collect(),
-            node_types: BUILTIN_NODE_TYPES
-                .iter()
-                .map(|name| Name::new(name))
-                .collect(),
-            edge_types: BUILTIN_EDGE_TYPES
-                .iter()
-                .map(|name| Name::new(name))
-                .collect(),
+            attrs: BUILTIN_ATTRIBUTES.iter().map(|(name, ty)| (Name::new(name), *ty)).collect(),
+            node_types: BUILTIN_NODE_TYPES.iter().map(|name| Name::new(name)).collect(),
+            edge_types: BUILTIN_EDGE_TYPES.iter().map(|name| Name::new(name)).collect(),
             allow_unknown: false,
         }
     }
 
     /// The built-in table, accepting unknown names: an unknown attribute takes the type it is first seen with.
     pub fn permissive() -> Self {
-        Dictionary {
-            allow_unknown: true,
-            ..Dictionary::builtin()
-        }
+        Dictionary { allow_unknown: true, ..Dictionary::builtin() }
     }
 
     /// Whether unknown names are accepted.
@@ -281,17 +266,11 @@ impl Dictionary {
     ///
     /// # Errors
     /// [`DictionaryError::AttrTypeConflict`] if the name is already known with another type.
-    pub fn declare_attr(
-        &mut self,
-        name: &str,
-        value_type: ValueType,
-    ) -> Result<(), DictionaryError> {
+    pub fn declare_attr(&mut self, name: &str, value_type: ValueType) -> Result<(), DictionaryError> {
         match self.attrs.get(name) {
-            Some(known) if *known != value_type => Err(DictionaryError::AttrTypeConflict {
-                name: name.to_owned(),
-                known: *known,
-                found: value_type,
-            }),
+            Some(known) if *known != value_type => {
+                Err(DictionaryError::AttrTypeConflict { name: name.to_owned(), known: *known, found: value_type })
+            }
             Some(_) => Ok(()),
             None => {
                 validate_name("attribute name", name)?;
@@ -330,27 +309,16 @@ impl Dictionary {
     ///
     /// # Errors
     /// [`DictionaryError::UnknownAttr`] or [`DictionaryError::AttrTypeConflict`].
-    pub fn check_attr(
-        &mut self,
-        name: &str,
-        value_type: ValueType,
-    ) -> Result<Name, DictionaryError> {
+    pub fn check_attr(&mut self, name: &str, value_type: ValueType) -> Result<Name, DictionaryError> {
         if let Some((known_name, known)) = self.attrs.get_key_value(name) {
             return if *known == value_type {
                 Ok(known_name.clone())
             } else {
-                Err(DictionaryError::AttrTypeConflict {
-                    name: name.to_owned(),
-                    known: *known,
-                    found: value_type,
-                })
+                Err(DictionaryError::AttrTypeConflict { name: name.to_owned(), known: *known, found: value_type })
             };
         }
         if !self.allow_unknown {
-            return Err(DictionaryError::UnknownAttr {
-                name: name.to_owned(),
-                found: value_type,
-            });
+            return Err(DictionaryError::UnknownAttr { name: name.to_owned(), found: value_type });
         }
         validate_name("attribute name", name)?;
         let interned = Name::new(name);
@@ -365,16 +333,11 @@ impl Dictionary {
     pub fn peek_attr(&self, name: &str, value_type: ValueType) -> Result<(), DictionaryError> {
         match self.attrs.get(name) {
             Some(known) if *known == value_type => Ok(()),
-            Some(known) => Err(DictionaryError::AttrTypeConflict {
-                name: name.to_owned(),
-                known: *known,
-                found: value_type,
-            }),
+            Some(known) => {
+                Err(DictionaryError::AttrTypeConflict { name: name.to_owned(), known: *known, found: value_type })
+            }
             None if self.allow_unknown => validate_name("attribute name", name),
-            None => Err(DictionaryError::UnknownAttr {
-                name: name.to_owned(),
-                found: value_type,
-            }),
+            None => Err(DictionaryError::UnknownAttr { name: name.to_owned(), found: value_type }),
         }
     }
 
@@ -412,17 +375,12 @@ impl Dictionary {
 
     /// The wire code of a built-in attribute name.
     pub(crate) fn builtin_attr_code(name: &str) -> Option<u16> {
-        BUILTIN_ATTRIBUTES
-            .iter()
-            .position(|(known, _)| *known == name)
-            .map(|index| index as u16)
+        BUILTIN_ATTRIBUTES.iter().position(|(known, _)| *known == name).map(|index| index as u16)
     }
 
     /// The built-in attribute name of a wire code.
     pub(crate) fn builtin_attr_name(code: u16) -> Option<&'static str> {
-        BUILTIN_ATTRIBUTES
-            .get(usize::from(code))
-            .map(|(name, _)| *name)
+        BUILTIN_ATTRIBUTES.get(usize::from(code)).map(|(name, _)| *name)
     }
 }
 
@@ -431,10 +389,7 @@ pub const MAX_NAME_LEN: usize = 255;
 
 fn validate_name(what: &'static str, name: &str) -> Result<(), DictionaryError> {
     if name.is_empty() || name.len() > MAX_NAME_LEN || name.chars().any(char::is_control) {
-        return Err(DictionaryError::InvalidName {
-            what,
-            name: name.chars().take(64).collect(),
-        });
+        return Err(DictionaryError::InvalidName { what, name: name.chars().take(64).collect() });
     }
     Ok(())
 }
@@ -464,10 +419,7 @@ fn peek_type(
         return Ok(());
     }
     if !allow_unknown {
-        return Err(DictionaryError::UnknownType {
-            what,
-            name: name.chars().take(64).collect(),
-        });
+        return Err(DictionaryError::UnknownType { what, name: name.chars().take(64).collect() });
     }
     validate_name(what, name)
 }

@@ -7,9 +7,7 @@ use crate::value::ValueType;
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum DictionaryError {
     /// An attribute name the dictionary does not know, with unknown names not allowed.
-    #[error(
-        "unknown attribute name {name:?} (value of type {found}); declare it or allow unknown names"
-    )]
+    #[error("unknown attribute name {name:?} (value of type {found}); declare it or allow unknown names")]
     UnknownAttr {
         /// The name.
         name: String,

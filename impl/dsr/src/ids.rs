@@ -65,9 +65,7 @@ impl fmt::Display for NodeId {
 
 /// A hybrid-logical-clock timestamp in nanoseconds: close to physical time, but strictly greater than every
 /// timestamp the replica has produced or received before (see [`crate::Replica`]).
-#[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub struct Stamp(pub u64);
 
 /// A short interned-by-sharing name: node types, edge types and attribute names.
@@ -146,11 +144,7 @@ pub struct EdgeKey {
 impl EdgeKey {
     /// Builds an edge key.
     pub fn new(from: NodeId, to: NodeId, edge_type: &str) -> Self {
-        EdgeKey {
-            from,
-            to,
-            edge_type: Name::new(edge_type),
-        }
+        EdgeKey { from, to, edge_type: Name::new(edge_type) }
     }
 }
 

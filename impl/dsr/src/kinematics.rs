@@ -80,11 +80,7 @@ pub fn euler_xyz(rotation: &UnitQuaternion<f64>) -> [f64; 3] {
     let m = m.matrix();
     let b = m[(0, 2)].clamp(-1.0, 1.0).asin();
     if m[(0, 2)].abs() < 1.0 - 1e-12 {
-        [
-            (-m[(1, 2)]).atan2(m[(2, 2)]),
-            b,
-            (-m[(0, 1)]).atan2(m[(0, 0)]),
-        ]
+        [(-m[(1, 2)]).atan2(m[(2, 2)]), b, (-m[(0, 1)]).atan2(m[(0, 0)])]
     } else {
         // Gimbal lock: only a ± c is defined; put it all in a.
         [m[(2, 1)].atan2(m[(1, 1)]), b, 0.0]
@@ -98,23 +94,13 @@ pub fn translation_mm(pose: &Isometry3<f64>) -> [f64; 3] {
 }
 
 fn three(edge: &EdgeRef<'_>, names: [&str; 2]) -> Result<[f64; 3], KinematicsError> {
-    let bad = |what: String| KinematicsError::BadEdge {
-        edge: edge.key().clone(),
-        what,
-    };
-    let value = edge
-        .attr(names[0])
-        .or_else(|| edge.attr(names[1]))
-        .ok_or_else(|| bad(format!("no `{}`", names[0])))?;
+    let bad = |what: String| KinematicsError::BadEdge { edge: edge.key().clone(), what };
+    let value = edge.attr(names[0]).or_else(|| edge.attr(names[1])).ok_or_else(|| bad(format!("no `{}`", names[0])))?;
     let floats: &[f32] = match value {
         Value::VecF32(values) => values,
         Value::F32x3(values) => values,
         other => {
-            return Err(bad(format!(
-                "`{}` is {:?}, not 3 floats",
-                names[0],
-                other.value_type()
-            )));
+            return Err(bad(format!("`{}` is {:?}, not 3 floats", names[0], other.value_type())));
         }
     };
     match floats {
@@ -122,11 +108,7 @@ fn three(edge: &EdgeRef<'_>, names: [&str; 2]) -> Result<[f64; 3], KinematicsErr
             Ok([f64::from(*x), f64::from(*y), f64::from(*z)])
         }
         [_, _, _] => Err(bad(format!("`{}` holds a non-finite value", names[0]))),
-        _ => Err(bad(format!(
-            "`{}` has {} values, not 3",
-            names[0],
-            floats.len()
-        ))),
+        _ => Err(bad(format!("`{}` has {} values, not 3", names[0], floats.len()))),
     }
 }
 
@@ -135,17 +117,8 @@ fn three(edge: &EdgeRef<'_>, names: [&str; 2]) -> Result<[f64; 3], KinematicsErr
 /// # Errors
 /// [`KinematicsError::BadEdge`] if an attribute is missing, of the wrong length or not finite.
 pub fn edge_pose(edge: &EdgeRef<'_>) -> Result<Isometry3<f64>, KinematicsError> {
-    let translation = three(
-        edge,
-        [attrs::RT_TRANSLATION.name(), attrs::TRANSLATION.name()],
-    )?;
-    let rotation = three(
-        edge,
-        [
-            attrs::RT_ROTATION_EULER_XYZ.name(),
-            attrs::ROTATION_EULER_XYZ.name(),
-        ],
-    )?;
+    let translation = three(edge, [attrs::RT_TRANSLATION.name(), attrs::TRANSLATION.name()])?;
+    let rotation = three(edge, [attrs::RT_ROTATION_EULER_XYZ.name(), attrs::ROTATION_EULER_XYZ.name()])?;
     Ok(rt_isometry(translation, rotation))
 }
 
@@ -169,10 +142,7 @@ impl Replica {
         if let Some(edge) = all.iter().find(|edge| Some(edge.from()) == declared) {
             return Ok(Some(*edge));
         }
-        Err(KinematicsError::SeveralParents {
-            node: id,
-            parents: all.iter().map(|e| e.from()).collect(),
-        })
+        Err(KinematicsError::SeveralParents { node: id, parents: all.iter().map(|e| e.from()).collect() })
     }
 
     /// Every ancestor of `id` (itself first) with the pose of `id` in that ancestor's frame.
@@ -215,12 +185,7 @@ impl Replica {
     ///
     /// # Errors
     /// As [`Replica::transform`].
-    pub fn transform_point(
-        &self,
-        from: NodeId,
-        to: NodeId,
-        point_mm: [f64; 3],
-    ) -> Result<[f64; 3], KinematicsError> {
+    pub fn transform_point(&self, from: NodeId, to: NodeId, point_mm: [f64; 3]) -> Result<[f64; 3], KinematicsError> {
         let p = self.transform(from, to)? * Point3::new(point_mm[0], point_mm[1], point_mm[2]);
         Ok([p.x, p.y, p.z])
     }
@@ -248,35 +213,19 @@ impl Replica {
     ) -> Result<Vec<Arc<Delta>>, OpError> {
         let key = EdgeKey::new(parent, child, RT);
         let pose = [
-            (
-                attrs::RT_TRANSLATION.name(),
-                Value::VecF32(Arc::from(translation_mm)),
-            ),
-            (
-                attrs::RT_ROTATION_EULER_XYZ.name(),
-                Value::VecF32(Arc::from(euler_xyz_rad)),
-            ),
+            (attrs::RT_TRANSLATION.name(), Value::VecF32(Arc::from(translation_mm))),
+            (attrs::RT_ROTATION_EULER_XYZ.name(), Value::VecF32(Arc::from(euler_xyz_rad))),
         ];
         if self.edge(&key).is_some() {
             return Ok(vec![self.set_attrs(now_ns, &key, pose)?]);
         }
-        let parent_level = self
-            .node(parent)
-            .ok_or(OpError::NoSuchNode(parent))?
-            .get(attrs::LEVEL)
-            .unwrap_or(0);
-        let attrs = pose
-            .into_iter()
-            .map(|(name, value)| (name.to_owned(), value))
-            .collect();
+        let parent_level = self.node(parent).ok_or(OpError::NoSuchNode(parent))?.get(attrs::LEVEL).unwrap_or(0);
+        let attrs = pose.into_iter().map(|(name, value)| (name.to_owned(), value)).collect();
         let (_, edge) = self.insert_edge(now_ns, parent, child, RT, attrs)?;
         let placed = self.set_attrs(
             now_ns,
             child,
-            [
-                (attrs::PARENT.name(), Value::U64(parent.0)),
-                (attrs::LEVEL.name(), Value::I32(parent_level + 1)),
-            ],
+            [(attrs::PARENT.name(), Value::U64(parent.0)), (attrs::LEVEL.name(), Value::I32(parent_level + 1))],
         )?;
         Ok(vec![edge, placed])
     }

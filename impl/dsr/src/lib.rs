@@ -106,7 +106,7 @@ pub use ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
 pub use kinematics::KinematicsError;
 pub use mutants::DsrMutant;
 pub use replica::{
-    Change, ChangeEvent, Digest, EdgeRef, LogLimits, Missing, NewNode, NodeRef, Replica,
-    VisibleAttr, VisibleGraph, VisibleNode,
+    Change, ChangeEvent, Digest, EdgeRef, LogLimits, Missing, NewNode, NodeRef, Replica, VisibleAttr, VisibleGraph,
+    VisibleNode,
 };
 pub use value::{AttrType, Value, ValueType};

@@ -16,17 +16,12 @@ use crate::dictionary::{AttrKey, Dictionary, MAX_NAME_LEN};
 use crate::error::{DeltaError, DictionaryError, OpError};
 use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
 use crate::mutants::{DsrMutant, Plant};
-use crate::store::{
-    Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store, drop_covered_attrs, join_attrs,
-};
+use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store, drop_covered_attrs, join_attrs};
 use crate::value::{AttrType, Value};
 
 /// Whether `name` is acceptable as a node name: 1 to 255 bytes, no control characters, no `#`.
 pub fn valid_node_name(name: &str) -> bool {
-    !name.is_empty()
-        && name.len() <= MAX_NAME_LEN
-        && !name.contains('#')
-        && !name.chars().any(char::is_control)
+    !name.is_empty() && name.len() <= MAX_NAME_LEN && !name.contains('#') && !name.chars().any(char::is_control)
 }
 
 /// A node to insert.
@@ -45,12 +40,7 @@ pub struct NewNode {
 impl NewNode {
     /// A node of `node_type` called `name`, with a minted id and no attributes.
     pub fn new(node_type: &str, name: &str) -> Self {
-        NewNode {
-            id: None,
-            node_type: node_type.to_owned(),
-            name: name.to_owned(),
-            attrs: Vec::new(),
-        }
+        NewNode { id: None, node_type: node_type.to_owned(), name: name.to_owned(), attrs: Vec::new() }
     }
 
     /// Uses a given id.
@@ -136,10 +126,7 @@ pub struct LogLimits {
 
 impl Default for LogLimits {
     fn default() -> Self {
-        LogLimits {
-            max_deltas: 4096,
-            max_payload_bytes: 64 << 20,
-        }
+        LogLimits { max_deltas: 4096, max_payload_bytes: 64 << 20 }
     }
 }
 
@@ -299,19 +286,12 @@ impl Replica {
     /// Turns change tracking on or off; while on, every change to the visible graph is queued for
     /// [`Replica::drain_changes`].
     pub fn set_change_tracking(&mut self, on: bool) {
-        self.changes = if on {
-            Some(self.changes.take().unwrap_or_default())
-        } else {
-            None
-        };
+        self.changes = if on { Some(self.changes.take().unwrap_or_default()) } else { None };
     }
 
     /// Takes the queued changes.
     pub fn drain_changes(&mut self) -> Vec<ChangeEvent> {
-        self.changes
-            .as_mut()
-            .map(std::mem::take)
-            .unwrap_or_default()
+        self.changes.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
     // -----------------------------------------------------------------------------------------------------------
@@ -327,28 +307,18 @@ impl Replica {
     }
 
     fn node_visible(&self, id: NodeId) -> bool {
-        !self.store.tombstones.contains(&id)
-            && self
-                .store
-                .nodes
-                .get(&id)
-                .is_some_and(|n| !n.core.is_empty())
+        !self.store.tombstones.contains(&id) && self.store.nodes.get(&id).is_some_and(|n| !n.core.is_empty())
     }
 
     fn edge_visible(&self, key: &EdgeKey) -> bool {
-        self.store
-            .edges
-            .get(key)
-            .is_some_and(|e| self.edge_entry_visible(key, e))
+        self.store.edges.get(key).is_some_and(|e| self.edge_entry_visible(key, e))
     }
 
     fn edge_entry_visible(&self, key: &EdgeKey, entry: &EdgeEntry) -> bool {
         if entry.presence.is_empty() {
             return false;
         }
-        if self.plant.is(DsrMutant::DeleteKeepsIncidentEdges)
-            || self.plant.is(DsrMutant::EdgeToDeletedNodeVisible)
-        {
+        if self.plant.is(DsrMutant::DeleteKeepsIncidentEdges) || self.plant.is(DsrMutant::EdgeToDeletedNodeVisible) {
             return true;
         }
         self.node_visible(key.from) && self.node_visible(key.to)
@@ -363,31 +333,16 @@ impl Replica {
     }
 
     /// Builds the delta of a local operation from its generated dots and store, then joins it.
-    fn commit(
-        &mut self,
-        first: u64,
-        last: u64,
-        mut ctx: CausalContext,
-        store: Store,
-    ) -> Arc<Delta> {
+    fn commit(&mut self, first: u64, last: u64, mut ctx: CausalContext, store: Store) -> Arc<Delta> {
         for counter in first..=last {
             ctx.insert(Dot::new(self.id, counter));
         }
-        let delta = Arc::new(Delta {
-            origin: Some(Origin {
-                replica: self.id,
-                first,
-                last,
-            }),
-            complete: false,
-            ctx,
-            store,
-        });
+        let delta =
+            Arc::new(Delta { origin: Some(Origin { replica: self.id, first, last }), complete: false, ctx, store });
         self.join(&delta);
         self.log.push(Arc::clone(&delta));
         #[cfg(feature = "check-invariants")]
-        self.check_invariants()
-            .expect("invariants after a local operation");
+        self.check_invariants().expect("invariants after a local operation");
         delta
     }
 
@@ -404,22 +359,12 @@ impl Replica {
     /// let (id, _delta) = replica.insert_node(1_000, NewNode::new("world", "world").with_attr("level", 0)).unwrap();
     /// assert_eq!(replica.node(id).unwrap().get(attrs::LEVEL), Some(0));
     /// ```
-    pub fn insert_node(
-        &mut self,
-        now_ns: u64,
-        node: NewNode,
-    ) -> Result<(NodeId, Arc<Delta>), OpError> {
+    pub fn insert_node(&mut self, now_ns: u64, node: NewNode) -> Result<(NodeId, Arc<Delta>), OpError> {
         self.dictionary.peek_node_type(&node.node_type)?;
         if !valid_node_name(&node.name) {
-            return Err(OpError::InvalidNodeName(
-                node.name.chars().take(64).collect(),
-            ));
+            return Err(OpError::InvalidNodeName(node.name.chars().take(64).collect()));
         }
-        if self
-            .names
-            .get(node.name.as_str())
-            .is_some_and(|holders| !holders.is_empty())
-        {
+        if self.names.get(node.name.as_str()).is_some_and(|holders| !holders.is_empty()) {
             return Err(OpError::NameTaken(node.name));
         }
         for (name, value) in &node.attrs {
@@ -440,20 +385,14 @@ impl Replica {
             core: Register::single(
                 Dot::new(self.id, counter),
                 stamp,
-                NodeCore {
-                    node_type,
-                    name: Name::new(&node.name),
-                },
+                NodeCore { node_type, name: Name::new(&node.name) },
             ),
             attrs: Attrs::new(),
         };
         for (name, value) in node.attrs {
             let name = self.dictionary.check_attr(&name, value.value_type())?;
             counter += 1;
-            entry.attrs.insert(
-                name,
-                Register::single(Dot::new(self.id, counter), stamp, value),
-            );
+            entry.attrs.insert(name, Register::single(Dot::new(self.id, counter), stamp, value));
         }
         if let Some(NodeId(sequence)) = node.id.filter(|id| id.0 >> 32 == u64::from(self.id.0)) {
             self.minted_nodes = self.minted_nodes.max(sequence as u32);
@@ -470,10 +409,7 @@ impl Replica {
 
     fn mint_node_id(&mut self) -> Result<NodeId, OpError> {
         loop {
-            let sequence = self
-                .minted_nodes
-                .checked_add(1)
-                .ok_or(OpError::IdSpaceExhausted)?;
+            let sequence = self.minted_nodes.checked_add(1).ok_or(OpError::IdSpaceExhausted)?;
             self.minted_nodes = sequence;
             let id = NodeId::minted(self.id, sequence);
             if !self.id_known(id) {
@@ -537,21 +473,15 @@ impl Replica {
             self.dictionary.peek_attr(name, value.value_type())?;
         }
         let edge_type = self.dictionary.check_edge_type(edge_type)?;
-        let key = EdgeKey {
-            from,
-            to,
-            edge_type,
-        };
+        let key = EdgeKey { from, to, edge_type };
         if self.edge_visible(&key) {
             return Err(OpError::EdgeExists(key));
         }
         let stamp = self.tick(now_ns);
         let first = self.next_counter();
         let mut counter = first;
-        let mut entry = EdgeEntry {
-            presence: Register::single(Dot::new(self.id, first), stamp, ()),
-            attrs: Attrs::new(),
-        };
+        let mut entry =
+            EdgeEntry { presence: Register::single(Dot::new(self.id, first), stamp, ()), attrs: Attrs::new() };
         // Leftovers of an earlier life of this edge (concurrent attribute writes) are cleared: the new edge has
         // exactly the attributes given.
         let mut ctx = CausalContext::default();
@@ -568,10 +498,7 @@ impl Replica {
         for (name, value) in attrs {
             let name = self.dictionary.check_attr(&name, value.value_type())?;
             counter += 1;
-            entry.attrs.insert(
-                name,
-                Register::single(Dot::new(self.id, counter), stamp, value),
-            );
+            entry.attrs.insert(name, Register::single(Dot::new(self.id, counter), stamp, value));
         }
         let mut store = Store::default();
         store.edges.insert(key.clone(), entry);
@@ -597,11 +524,7 @@ impl Replica {
         }
         let entry = EdgeEntry {
             presence: Register::default(),
-            attrs: old
-                .attrs
-                .keys()
-                .map(|name| (name.clone(), Register::default()))
-                .collect(),
+            attrs: old.attrs.keys().map(|name| (name.clone(), Register::default())).collect(),
         };
         let mut store = Store::default();
         store.edges.insert(key.clone(), entry);
@@ -658,10 +581,7 @@ impl Replica {
         for (name, value) in attrs {
             let name = self.dictionary.check_attr(name, value.value_type())?;
             counter += 1;
-            registers.insert(
-                name,
-                Register::single(Dot::new(self.id, counter), stamp, value),
-            );
+            registers.insert(name, Register::single(Dot::new(self.id, counter), stamp, value));
         }
         if counter < first {
             // Nothing to write: still a valid (empty) operation, but it needs a dot of its own.
@@ -676,19 +596,11 @@ impl Replica {
     ///
     /// # Errors
     /// [`OpError::NoSuchElement`] or [`OpError::NoSuchAttr`].
-    pub fn remove_attr(
-        &mut self,
-        now_ns: u64,
-        element: impl Into<Element>,
-        name: &str,
-    ) -> Result<Arc<Delta>, OpError> {
+    pub fn remove_attr(&mut self, now_ns: u64, element: impl Into<Element>, name: &str) -> Result<Arc<Delta>, OpError> {
         let element = element.into();
         let existing = self.element_attrs(&element)?;
         let Some((name, register)) = existing.get_key_value(name) else {
-            return Err(OpError::NoSuchAttr {
-                element,
-                name: name.to_owned(),
-            });
+            return Err(OpError::NoSuchAttr { element, name: name.to_owned() });
         };
         let name = name.clone();
         let mut ctx = CausalContext::default();
@@ -716,35 +628,30 @@ impl Replica {
     pub fn apply(&mut self, delta: &Delta) -> Result<(), DeltaError> {
         self.check_names(delta)?;
         // Register new names only once the whole delta has passed.
-        let register_all =
-            |dictionary: &mut Dictionary, delta: &Delta| -> Result<(), DictionaryError> {
-                for node in delta.store.nodes.values() {
-                    for core in &node.core.values {
-                        dictionary.check_node_type(&core.value.node_type)?;
-                    }
-                    for (name, register) in &node.attrs {
-                        for entry in &register.values {
-                            dictionary.check_attr(name, entry.value.value_type())?;
-                        }
+        let register_all = |dictionary: &mut Dictionary, delta: &Delta| -> Result<(), DictionaryError> {
+            for node in delta.store.nodes.values() {
+                for core in &node.core.values {
+                    dictionary.check_node_type(&core.value.node_type)?;
+                }
+                for (name, register) in &node.attrs {
+                    for entry in &register.values {
+                        dictionary.check_attr(name, entry.value.value_type())?;
                     }
                 }
-                for (key, edge) in &delta.store.edges {
-                    dictionary.check_edge_type(&key.edge_type)?;
-                    for (name, register) in &edge.attrs {
-                        for entry in &register.values {
-                            dictionary.check_attr(name, entry.value.value_type())?;
-                        }
+            }
+            for (key, edge) in &delta.store.edges {
+                dictionary.check_edge_type(&key.edge_type)?;
+                for (name, register) in &edge.attrs {
+                    for entry in &register.values {
+                        dictionary.check_attr(name, entry.value.value_type())?;
                     }
                 }
-                Ok(())
-            };
-        register_all(&mut self.dictionary, delta).map_err(|source| DeltaError::Dictionary {
-            place: "delta".into(),
-            source,
-        })?;
-        let duplicate = delta
-            .origin
-            .is_some_and(|o| o.dots().all(|dot| self.ctx.contains(dot)));
+            }
+            Ok(())
+        };
+        register_all(&mut self.dictionary, delta)
+            .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
+        let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.ctx.contains(dot)));
         self.join(delta);
         if !duplicate && delta.origin.is_some() && !delta.complete {
             self.log.push(Arc::new(delta.clone()));
@@ -762,17 +669,11 @@ impl Replica {
                 for entry in &register.values {
                     let ty = entry.value.value_type();
                     let place = || format!("{} attribute {name:?}", owner());
-                    self.dictionary.peek_attr(name, ty).map_err(|source| {
-                        DeltaError::Dictionary {
-                            place: place(),
-                            source,
-                        }
-                    })?;
+                    self.dictionary
+                        .peek_attr(name, ty)
+                        .map_err(|source| DeltaError::Dictionary { place: place(), source })?;
                     // Two values of different types for one unknown name within a delta is a conflict too.
-                    if let Some(first) = first_types
-                        .insert(name.clone(), ty)
-                        .filter(|first| *first != ty)
-                    {
+                    if let Some(first) = first_types.insert(name.clone(), ty).filter(|first| *first != ty) {
                         return Err(DeltaError::Dictionary {
                             place: place(),
                             source: DictionaryError::AttrTypeConflict {
@@ -790,20 +691,14 @@ impl Replica {
             for core in &node.core.values {
                 self.dictionary
                     .peek_node_type(&core.value.node_type)
-                    .map_err(|source| DeltaError::Dictionary {
-                        place: format!("node {id}"),
-                        source,
-                    })?;
+                    .map_err(|source| DeltaError::Dictionary { place: format!("node {id}"), source })?;
             }
             attrs(&node.attrs, &|| format!("node {id}"))?;
         }
         for (key, edge) in &delta.store.edges {
             self.dictionary
                 .peek_edge_type(&key.edge_type)
-                .map_err(|source| DeltaError::Dictionary {
-                    place: format!("edge {key}"),
-                    source,
-                })?;
+                .map_err(|source| DeltaError::Dictionary { place: format!("edge {key}"), source })?;
             attrs(&edge.attrs, &|| format!("edge {key}"))?;
         }
         Ok(())
@@ -861,14 +756,12 @@ impl Replica {
         }
 
         for (key, theirs) in &delta.store.edges {
-            let dead_end = self.store.tombstones.contains(&key.from)
-                || self.store.tombstones.contains(&key.to);
+            let dead_end = self.store.tombstones.contains(&key.from) || self.store.tombstones.contains(&key.to);
             if dead_end && !plant.is(DsrMutant::EdgeToDeletedNodeVisible) {
                 continue;
             }
             let mine = self.store.edges.entry(key.clone()).or_default();
-            mine.presence
-                .join(&theirs.presence, &self.ctx, &delta.ctx, plant);
+            mine.presence.join(&theirs.presence, &self.ctx, &delta.ctx, plant);
             changed_attrs.clear();
             join_attrs(
                 &mut mine.attrs,
@@ -924,24 +817,12 @@ impl Replica {
                 }
             };
             for id in touched.nodes.clone() {
-                names(
-                    Element::Node(id),
-                    self.store.nodes.get(&id).map(|n| &n.attrs),
-                );
-                names(
-                    Element::Node(id),
-                    delta.store.nodes.get(&id).map(|n| &n.attrs),
-                );
+                names(Element::Node(id), self.store.nodes.get(&id).map(|n| &n.attrs));
+                names(Element::Node(id), delta.store.nodes.get(&id).map(|n| &n.attrs));
             }
             for key in touched.edges.clone() {
-                names(
-                    Element::Edge(key.clone()),
-                    self.store.edges.get(&key).map(|e| &e.attrs),
-                );
-                names(
-                    Element::Edge(key.clone()),
-                    delta.store.edges.get(&key).map(|e| &e.attrs),
-                );
+                names(Element::Edge(key.clone()), self.store.edges.get(&key).map(|e| &e.attrs));
+                names(Element::Edge(key.clone()), delta.store.edges.get(&key).map(|e| &e.attrs));
             }
         }
         touched
@@ -950,16 +831,8 @@ impl Replica {
     fn look(&self, touched: &Touched) -> Before {
         let plant = self.plant;
         Before {
-            nodes: touched
-                .nodes
-                .iter()
-                .map(|id| (*id, self.node_visible(*id)))
-                .collect(),
-            edges: touched
-                .edges
-                .iter()
-                .map(|key| (key.clone(), self.edge_visible(key)))
-                .collect(),
+            nodes: touched.nodes.iter().map(|id| (*id, self.node_visible(*id))).collect(),
+            edges: touched.edges.iter().map(|key| (key.clone(), self.edge_visible(key))).collect(),
             attrs: touched
                 .attrs
                 .iter()
@@ -1003,10 +876,9 @@ impl Replica {
         for ((element, name), was) in &before.attrs {
             let now = after.attrs[&(element.clone(), name.clone())];
             let change = match (was, now) {
-                (_, Some(dot)) if *was != Some(dot) => Change::AttrUpdated {
-                    element: element.clone(),
-                    name: name.clone(),
-                },
+                (_, Some(dot)) if *was != Some(dot) => {
+                    Change::AttrUpdated { element: element.clone(), name: name.clone() }
+                }
                 (Some(_), None) => {
                     let still_visible = match element {
                         Element::Node(id) => after.nodes.get(id).copied().unwrap_or(false),
@@ -1015,10 +887,7 @@ impl Replica {
                     if !still_visible {
                         continue; // the element's deletion says it all
                     }
-                    Change::AttrRemoved {
-                        element: element.clone(),
-                        name: name.clone(),
-                    }
+                    Change::AttrRemoved { element: element.clone(), name: name.clone() }
                 }
                 _ => continue,
             };
@@ -1033,16 +902,10 @@ impl Replica {
     fn reindex(&mut self, touched: &mut Touched) {
         for key in &touched.edges {
             if self.store.edges.contains_key(key) {
-                self.out_edges
-                    .entry(key.from)
-                    .or_default()
-                    .insert(key.clone());
+                self.out_edges.entry(key.from).or_default().insert(key.clone());
                 self.in_edges.entry(key.to).or_default().insert(key.clone());
             } else {
-                for (index, id) in [
-                    (&mut self.out_edges, key.from),
-                    (&mut self.in_edges, key.to),
-                ] {
+                for (index, id) in [(&mut self.out_edges, key.from), (&mut self.in_edges, key.to)] {
                     if let Some(keys) = index.get_mut(&id) {
                         keys.remove(key);
                         if keys.is_empty() {
@@ -1064,15 +927,9 @@ impl Replica {
             if !self.node_visible(*id) {
                 continue;
             }
-            let core = self.store.nodes[id]
-                .core
-                .winner_planted(self.plant)
-                .expect("a visible node has a core");
+            let core = self.store.nodes[id].core.winner_planted(self.plant).expect("a visible node has a core");
             let (name, stamp) = (core.value.name.clone(), core.stamp);
-            self.names
-                .entry(name.clone())
-                .or_default()
-                .insert((stamp, *id));
+            self.names.entry(name.clone()).or_default().insert((stamp, *id));
             self.indexed_names.insert(*id, (name, stamp));
         }
     }
@@ -1082,21 +939,13 @@ impl Replica {
 
     /// The whole state as a delta: joining it gives a replica everything this one has.
     pub fn snapshot(&self) -> Delta {
-        Delta {
-            origin: None,
-            complete: true,
-            ctx: self.ctx.clone(),
-            store: self.store.clone(),
-        }
+        Delta { origin: None, complete: true, ctx: self.ctx.clone(), store: self.store.clone() }
     }
 
     /// What a peer whose causal context is `peer` lacks: nothing, a set of retained deltas, or (when the retained
     /// history does not cover the gap) a snapshot.
     pub fn missing_for(&self, peer: &CausalContext) -> Missing {
-        let Some(missing) = self
-            .ctx
-            .missing_from(peer, self.log.deltas.len().max(1) * 4)
-        else {
+        let Some(missing) = self.ctx.missing_from(peer, self.log.deltas.len().max(1) * 4) else {
             return Missing::Snapshot(self.snapshot());
         };
         if missing.is_empty() {
@@ -1135,12 +984,7 @@ impl Replica {
         }
         let entry = &self.store.nodes[&id];
         let core = entry.core.winner_planted(self.plant)?;
-        Some(NodeRef {
-            replica: self,
-            id,
-            entry,
-            core,
-        })
+        Some(NodeRef { replica: self, id, entry, core })
     }
 
     /// The visible node shown under `name` (see the crate docs for renamed nodes, `name#id`).
@@ -1166,24 +1010,16 @@ impl Replica {
     /// A visible edge.
     pub fn edge(&self, key: &EdgeKey) -> Option<EdgeRef<'_>> {
         let (key, entry) = self.store.edges.get_key_value(key)?;
-        self.edge_entry_visible(key, entry).then_some(EdgeRef {
-            replica: self,
-            key,
-            entry,
-        })
+        self.edge_entry_visible(key, entry).then_some(EdgeRef { replica: self, key, entry })
     }
 
     /// Every visible edge, in key order.
     pub fn edges(&self) -> impl Iterator<Item = EdgeRef<'_>> + '_ {
-        self.store
-            .edges
-            .iter()
-            .filter(|(key, entry)| self.edge_entry_visible(key, entry))
-            .map(|(key, entry)| EdgeRef {
-                replica: self,
-                key,
-                entry,
-            })
+        self.store.edges.iter().filter(|(key, entry)| self.edge_entry_visible(key, entry)).map(|(key, entry)| EdgeRef {
+            replica: self,
+            key,
+            entry,
+        })
     }
 
     /// Number of visible edges.
@@ -1193,20 +1029,12 @@ impl Replica {
 
     /// Visible edges leaving `id`.
     pub fn out_edges(&self, id: NodeId) -> impl Iterator<Item = EdgeRef<'_>> + '_ {
-        self.out_edges
-            .get(&id)
-            .into_iter()
-            .flatten()
-            .filter_map(|key| self.edge(key))
+        self.out_edges.get(&id).into_iter().flatten().filter_map(|key| self.edge(key))
     }
 
     /// Visible edges entering `id`.
     pub fn in_edges(&self, id: NodeId) -> impl Iterator<Item = EdgeRef<'_>> + '_ {
-        self.in_edges
-            .get(&id)
-            .into_iter()
-            .flatten()
-            .filter_map(|key| self.edge(key))
+        self.in_edges.get(&id).into_iter().flatten().filter_map(|key| self.edge(key))
     }
 
     /// Whether `id` was deleted (it can never be visible again).
@@ -1221,19 +1049,10 @@ impl Replica {
                 .iter()
                 .filter_map(|(name, register)| {
                     let winner = register.winner_planted(self.plant)?;
-                    let mut concurrent: Vec<(Stamp, ReplicaId, Value)> = register
-                        .values
-                        .iter()
-                        .map(|e| (e.stamp, e.dot.replica, e.value.clone()))
-                        .collect();
+                    let mut concurrent: Vec<(Stamp, ReplicaId, Value)> =
+                        register.values.iter().map(|e| (e.stamp, e.dot.replica, e.value.clone())).collect();
                     concurrent.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
-                    Some((
-                        name.clone(),
-                        VisibleAttr {
-                            value: winner.value.clone(),
-                            concurrent,
-                        },
-                    ))
+                    Some((name.clone(), VisibleAttr { value: winner.value.clone(), concurrent }))
                 })
                 .collect()
         };
@@ -1249,10 +1068,7 @@ impl Replica {
                     (node.id, visible)
                 })
                 .collect(),
-            edges: self
-                .edges()
-                .map(|edge| (edge.key.clone(), attrs(&edge.entry.attrs)))
-                .collect(),
+            edges: self.edges().map(|edge| (edge.key.clone(), attrs(&edge.entry.attrs))).collect(),
         }
     }
 
@@ -1296,11 +1112,7 @@ impl Replica {
                     return Err(format!("edge {key}: dot {dot} not in the causal context"));
                 }
             }
-            if !self
-                .out_edges
-                .get(&key.from)
-                .is_some_and(|keys| keys.contains(key))
-            {
+            if !self.out_edges.get(&key.from).is_some_and(|keys| keys.contains(key)) {
                 return Err(format!("edge {key} missing from the out-edge index"));
             }
         }
@@ -1317,22 +1129,10 @@ fn element_store(element: &Element, registers: Attrs) -> Store {
     let mut store = Store::default();
     match element {
         Element::Node(id) => {
-            store.nodes.insert(
-                *id,
-                NodeEntry {
-                    core: Register::default(),
-                    attrs: registers,
-                },
-            );
+            store.nodes.insert(*id, NodeEntry { core: Register::default(), attrs: registers });
         }
         Element::Edge(key) => {
-            store.edges.insert(
-                key.clone(),
-                EdgeEntry {
-                    presence: Register::default(),
-                    attrs: registers,
-                },
-            );
+            store.edges.insert(key.clone(), EdgeEntry { presence: Register::default(), attrs: registers });
         }
     }
     store
@@ -1461,17 +1261,8 @@ impl<'a> NodeRef<'a> {
     /// concurrently with the same name holds it (the earliest stamp, then the lowest id, keeps the plain name).
     pub fn name(&self) -> Cow<'a, str> {
         let name = &self.core.value.name;
-        let holder = self
-            .replica
-            .names
-            .get(name)
-            .and_then(|holders| holders.first())
-            .map(|(_, id)| *id);
-        if holder == Some(self.id) {
-            Cow::Borrowed(name.as_str())
-        } else {
-            Cow::Owned(format!("{name}#{}", self.id))
-        }
+        let holder = self.replica.names.get(name).and_then(|holders| holders.first()).map(|(_, id)| *id);
+        if holder == Some(self.id) { Cow::Borrowed(name.as_str()) } else { Cow::Owned(format!("{name}#{}", self.id)) }
     }
 
     /// The name as inserted.
@@ -1491,18 +1282,12 @@ impl<'a> NodeRef<'a> {
 
     /// The winning value of an attribute with its stamp and writer.
     pub fn attr_entry(&self, name: &str) -> Option<&'a Entry<Value>> {
-        self.entry
-            .attrs
-            .get(name)?
-            .winner_planted(self.replica.plant)
+        self.entry.attrs.get(name)?.winner_planted(self.replica.plant)
     }
 
     /// Every concurrent value of an attribute (empty if absent).
     pub fn concurrent(&self, name: &str) -> &'a [Entry<Value>] {
-        self.entry
-            .attrs
-            .get(name)
-            .map_or(&[], |register| register.entries())
+        self.entry.attrs.get(name).map_or(&[], |register| register.entries())
     }
 
     /// A typed attribute value (`None` if absent).
@@ -1513,9 +1298,7 @@ impl<'a> NodeRef<'a> {
     /// Every attribute with its winning value, in name order.
     pub fn attrs(&self) -> impl Iterator<Item = (&'a Name, &'a Value)> + 'a {
         let plant = self.replica.plant;
-        self.entry.attrs.iter().filter_map(move |(name, register)| {
-            Some((name, &register.winner_planted(plant)?.value))
-        })
+        self.entry.attrs.iter().filter_map(move |(name, register)| Some((name, &register.winner_planted(plant)?.value)))
     }
 }
 
@@ -1565,18 +1348,12 @@ impl<'a> EdgeRef<'a> {
 
     /// The winning value of an attribute with its stamp and writer.
     pub fn attr_entry(&self, name: &str) -> Option<&'a Entry<Value>> {
-        self.entry
-            .attrs
-            .get(name)?
-            .winner_planted(self.replica.plant)
+        self.entry.attrs.get(name)?.winner_planted(self.replica.plant)
     }
 
     /// Every concurrent value of an attribute (empty if absent).
     pub fn concurrent(&self, name: &str) -> &'a [Entry<Value>] {
-        self.entry
-            .attrs
-            .get(name)
-            .map_or(&[], |register| register.entries())
+        self.entry.attrs.get(name).map_or(&[], |register| register.entries())
     }
 
     /// A typed attribute value.
@@ -1587,9 +1364,7 @@ impl<'a> EdgeRef<'a> {
     /// Every attribute with its winning value, in name order.
     pub fn attrs(&self) -> impl Iterator<Item = (&'a Name, &'a Value)> + 'a {
         let plant = self.replica.plant;
-        self.entry.attrs.iter().filter_map(move |(name, register)| {
-            Some((name, &register.winner_planted(plant)?.value))
-        })
+        self.entry.attrs.iter().filter_map(move |(name, register)| Some((name, &register.winner_planted(plant)?.value)))
     }
 }
 

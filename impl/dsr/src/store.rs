@@ -36,6 +36,7 @@ impl<T> Entry<T> {
 }
 
 /// A multi-value register: every concurrent write is kept until a later write (or removal) that has seen it.
+/// Values are kept sorted by dot.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct Register<T> {
     pub(crate) values: SmallVec<[Entry<T>; 1]>,
@@ -43,9 +44,7 @@ pub struct Register<T> {
 
 impl<T> Default for Register<T> {
     fn default() -> Self {
-        Register {
-            values: SmallVec::new(),
-        }
+        Register { values: SmallVec::new() }
     }
 }
 
@@ -94,17 +93,29 @@ impl<T: Clone> Register<T> {
         plant: Plant,
     ) -> bool {
         let before = self.values.len();
-        self.values.retain(|mine| {
-            other.values.iter().any(|theirs| theirs.dot == mine.dot)
-                || !other_ctx.contains(mine.dot)
-        });
+        self.values
+            .retain(|mine| other.values.iter().any(|theirs| theirs.dot == mine.dot) || !other_ctx.contains(mine.dot));
         let mut changed = self.values.len() != before;
         for theirs in &other.values {
             // Mutant: a value this replica has seen and since removed comes back.
             let seen = self_ctx.contains(theirs.dot) && !plant.is(DsrMutant::JoinNotIdempotent);
-            if !seen && !self.values.iter().any(|mine| mine.dot == theirs.dot) {
-                self.values.push(theirs.clone());
-                changed = true;
+            if seen {
+                continue;
+            }
+            // Values stay sorted by dot, so equal states are equal structurally (the model checker relies on
+            // it). The arrival-order mutant keeps arrival order instead.
+            match self.values.binary_search_by_key(&theirs.dot, |mine| mine.dot) {
+                Ok(_) => {}
+                Err(_) if plant.is(DsrMutant::TieBreakByArrival) => {
+                    if !self.values.iter().any(|mine| mine.dot == theirs.dot) {
+                        self.values.push(theirs.clone());
+                        changed = true;
+                    }
+                }
+                Err(index) => {
+                    self.values.insert(index, theirs.clone());
+                    changed = true;
+                }
             }
         }
         changed
@@ -165,9 +176,7 @@ impl NodeEntry {
     }
 
     pub(crate) fn dots(&self) -> impl Iterator<Item = Dot> + '_ {
-        self.core
-            .dots()
-            .chain(self.attrs.values().flat_map(Register::dots))
+        self.core.dots().chain(self.attrs.values().flat_map(Register::dots))
     }
 }
 
@@ -177,9 +186,7 @@ impl EdgeEntry {
     }
 
     pub(crate) fn dots(&self) -> impl Iterator<Item = Dot> + '_ {
-        self.presence
-            .dots()
-            .chain(self.attrs.values().flat_map(Register::dots))
+        self.presence.dots().chain(self.attrs.values().flat_map(Register::dots))
     }
 }
 
@@ -217,11 +224,7 @@ pub(crate) fn join_attrs(
 }
 
 /// Drops every dot `ctx` covers from attribute registers (the join with an absent entry of a full state).
-pub(crate) fn drop_covered_attrs(
-    mine: &mut Attrs,
-    ctx: &CausalContext,
-    changed: &mut SmallVec<[Name; 2]>,
-) {
+pub(crate) fn drop_covered_attrs(mine: &mut Attrs, ctx: &CausalContext, changed: &mut SmallVec<[Name; 2]>) {
     mine.retain(|name, register| {
         if register.drop_covered(ctx) {
             changed.push(name.clone());

@@ -263,11 +263,7 @@ impl std::hash::Hash for Value {
 impl fmt::Debug for Value {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         const SHOWN: usize = 8;
-        fn list<T: fmt::Debug>(
-            f: &mut fmt::Formatter<'_>,
-            name: &str,
-            values: &[T],
-        ) -> fmt::Result {
+        fn list<T: fmt::Debug>(f: &mut fmt::Formatter<'_>, name: &str, values: &[T]) -> fmt::Result {
             if values.len() <= SHOWN {
                 write!(f, "{name}({values:?})")
             } else {
@@ -351,9 +347,7 @@ macro_rules! value_from {
         }
     )*};
 }
-value_from!(
-    i32, f32, bool, u32, u64, f64, [f32; 2], [f32; 3], [f32; 4], [f32; 6], Bytes
-);
+value_from!(i32, f32, bool, u32, u64, f64, [f32; 2], [f32; 3], [f32; 4], [f32; 6], Bytes);
 
 impl From<Vec<f32>> for Value {
     fn from(values: Vec<f32>) -> Self {
@@ -371,10 +365,7 @@ impl From<Vec<u64>> for Value {
 mod f32_slice {
     use super::*;
 
-    pub fn serialize<S: serde::Serializer>(
-        values: &Arc<[f32]>,
-        serializer: S,
-    ) -> Result<S::Ok, S::Error> {
+    pub fn serialize<S: serde::Serializer>(values: &Arc<[f32]>, serializer: S) -> Result<S::Ok, S::Error> {
         let mut bytes = Vec::with_capacity(values.len() * 4);
         for value in values.iter() {
             bytes.extend_from_slice(&value.to_le_bytes());
@@ -382,9 +373,7 @@ mod f32_slice {
         serializer.serialize_bytes(&bytes)
     }
 
-    pub fn deserialize<'de, D: serde::Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Arc<[f32]>, D::Error> {
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Arc<[f32]>, D::Error> {
         deserializer.deserialize_bytes(Visitor)
     }
 
@@ -397,15 +386,9 @@ mod f32_slice {
         }
         fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[f32]>, E> {
             if bytes.len() % 4 != 0 {
-                return Err(E::custom(format!(
-                    "f32 vector of {} bytes is not a multiple of 4",
-                    bytes.len()
-                )));
+                return Err(E::custom(format!("f32 vector of {} bytes is not a multiple of 4", bytes.len())));
             }
-            Ok(bytes
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect())
+            Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
         }
     }
 }
@@ -414,10 +397,7 @@ mod f32_slice {
 mod u64_slice {
     use super::*;
 
-    pub fn serialize<S: serde::Serializer>(
-        values: &Arc<[u64]>,
-        serializer: S,
-    ) -> Result<S::Ok, S::Error> {
+    pub fn serialize<S: serde::Serializer>(values: &Arc<[u64]>, serializer: S) -> Result<S::Ok, S::Error> {
         let mut bytes = Vec::with_capacity(values.len() * 8);
         for value in values.iter() {
             bytes.extend_from_slice(&value.to_le_bytes());
@@ -425,9 +405,7 @@ mod u64_slice {
         serializer.serialize_bytes(&bytes)
     }
 
-    pub fn deserialize<'de, D: serde::Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Arc<[u64]>, D::Error> {
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Arc<[u64]>, D::Error> {
         deserializer.deserialize_bytes(Visitor)
     }
 
@@ -440,10 +418,7 @@ mod u64_slice {
         }
         fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[u64]>, E> {
             if bytes.len() % 8 != 0 {
-                return Err(E::custom(format!(
-                    "u64 vector of {} bytes is not a multiple of 8",
-                    bytes.len()
-                )));
+                return Err(E::custom(format!("u64 vector of {} bytes is not a multiple of 8", bytes.len())));
             }
             Ok(bytes
                 .chunks_exact(8)
@@ -457,16 +432,11 @@ mod u64_slice {
 mod byte_buffer {
     use super::*;
 
-    pub fn serialize<S: serde::Serializer>(
-        bytes: &Bytes,
-        serializer: S,
-    ) -> Result<S::Ok, S::Error> {
+    pub fn serialize<S: serde::Serializer>(bytes: &Bytes, serializer: S) -> Result<S::Ok, S::Error> {
         serializer.serialize_bytes(bytes)
     }
 
-    pub fn deserialize<'de, D: serde::Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Bytes, D::Error> {
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Bytes, D::Error> {
         deserializer.deserialize_bytes(Visitor)
     }
 

@@ -16,9 +16,7 @@ fn ship(delta: &Delta, to: &mut Replica) {
 fn deltas_converge_in_any_order_with_duplicates() {
     let (mut a, mut b) = pair();
     let (w, d1) = a.insert_node(10, NewNode::new("world", "world")).unwrap();
-    let (r, d2) = a
-        .insert_node(11, NewNode::new("omnirobot", "robot").with_attr("level", 1))
-        .unwrap();
+    let (r, d2) = a.insert_node(11, NewNode::new("omnirobot", "robot").with_attr("level", 1)).unwrap();
     let (_, d3) = a.insert_edge(12, w, r, "RT", vec![]).unwrap();
     let d4 = a.set_attr(13, r, attrs::LEVEL, 2).unwrap();
     for d in [&d4, &d3, &d3, &d2, &d1, &d4] {
@@ -40,10 +38,7 @@ fn deleted_node_is_not_resurrected_by_a_concurrent_write() {
     ship(&del, &mut b);
     assert!(a.node(n).is_none() && b.node(n).is_none());
     assert_eq!(a.digest(), b.digest());
-    assert!(matches!(
-        a.insert_node(3, NewNode::new("object", "cup").with_id(n)),
-        Err(OpError::IdTaken(_))
-    ));
+    assert!(matches!(a.insert_node(3, NewNode::new("object", "cup").with_id(n)), Err(OpError::IdTaken(_))));
 }
 
 #[test]
@@ -87,9 +82,7 @@ fn edge_before_its_nodes_is_kept_and_shown_later() {
     let (mut a, mut b) = pair();
     let (x, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
     let (y, d2) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
-    let (key, d3) = a
-        .insert_edge(3, x, y, "in", vec![("level".into(), Value::I32(3))])
-        .unwrap();
+    let (key, d3) = a.insert_edge(3, x, y, "in", vec![("level".into(), Value::I32(3))]).unwrap();
     ship(&d3, &mut b);
     assert_eq!(b.edge_count(), 0);
     ship(&d1, &mut b);
@@ -124,19 +117,12 @@ fn concurrent_same_name_inserts_resolve_identically() {
     let (nb, db) = b.insert_node(7, NewNode::new("person", "alice")).unwrap();
     ship(&da, &mut b);
     ship(&db, &mut a);
-    assert_eq!(
-        a.node_by_name("alice").unwrap().id(),
-        na,
-        "earliest stamp keeps the name"
-    );
+    assert_eq!(a.node_by_name("alice").unwrap().id(), na, "earliest stamp keeps the name");
     let renamed = format!("alice#{nb}");
     assert_eq!(a.node_by_name(&renamed).unwrap().id(), nb);
     assert_eq!(a.digest(), b.digest());
     a.check_invariants().unwrap();
-    assert!(matches!(
-        a.insert_node(9, NewNode::new("person", "alice")),
-        Err(OpError::NameTaken(_))
-    ));
+    assert!(matches!(a.insert_node(9, NewNode::new("person", "alice")), Err(OpError::NameTaken(_))));
 }
 
 #[test]
@@ -185,23 +171,11 @@ fn change_events_report_local_and_remote_changes() {
     let changes: Vec<Change> = b.drain_changes().into_iter().map(|e| e.change).collect();
     assert_eq!(
         changes,
-        vec![
-            Change::NodeInserted { id: x },
-            Change::NodeInserted { id: y },
-            Change::EdgeInserted { key: key.clone() },
-        ]
+        vec![Change::NodeInserted { id: x }, Change::NodeInserted { id: y }, Change::EdgeInserted { key: key.clone() },]
     );
     let d = a.delete_node(4, y).unwrap();
     ship(&d, &mut b);
     let changes: Vec<Change> = b.drain_changes().into_iter().map(|e| e.change).collect();
-    assert_eq!(
-        changes,
-        vec![
-            Change::NodeDeleted { id: y },
-            Change::EdgeDeleted {
-                key: EdgeKey::new(x, y, "in")
-            }
-        ]
-    );
+    assert_eq!(changes, vec![Change::NodeDeleted { id: y }, Change::EdgeDeleted { key: EdgeKey::new(x, y, "in") }]);
     let _ = NodeId(0);
 }
