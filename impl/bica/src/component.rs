@@ -242,15 +242,14 @@ impl StepContext<'_> {
     /// Steps a component by id.
     pub fn step_id(&mut self, id: ComponentId) -> Result<Stepped, BicaError> {
         let now_ns = self.clock.now_ns();
-        let gate = self.core.begin_step(id, now_ns, Caller::Nested { parent: self.current }).map_err(|error| {
-            match error {
+        let gate =
+            self.core.begin_step(id, now_ns, Caller::Nested { parent: self.current }).map_err(|error| match error {
                 BicaError::CascadeCycle { path, .. } => BicaError::CascadeCycle {
                     component: self.registry.name(id).unwrap_or("?").to_owned(),
                     path: self.describe_path(&path),
                 },
                 other => other,
-            }
-        })?;
+            })?;
         match gate {
             Gate::NotDue { .. } => Ok(Stepped::NotDue),
             Gate::Run(info) => {

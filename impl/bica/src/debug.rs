@@ -140,7 +140,13 @@ impl DebugPrimitive {
     }
 
     /// An image primitive, checking the pixel buffer matches its size.
-    pub fn image(frame: Frame, top_left: Point2, width_px: u32, height_px: u32, rgb8: Vec<u8>) -> Result<Self, BicaError> {
+    pub fn image(
+        frame: Frame,
+        top_left: Point2,
+        width_px: u32,
+        height_px: u32,
+        rgb8: Vec<u8>,
+    ) -> Result<Self, BicaError> {
         let expected = (width_px as usize).checked_mul(height_px as usize).and_then(|p| p.checked_mul(3));
         match expected {
             Some(expected) if expected == rgb8.len() && expected <= MAX_IMAGE_BYTES => Ok(Self {

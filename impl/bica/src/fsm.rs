@@ -13,7 +13,7 @@
 
 use std::fmt::Debug;
 
-use crate::component::{Component, Stepped, StepContext};
+use crate::component::{Component, StepContext, Stepped};
 use crate::error::BicaError;
 
 type StepFn = fn(&mut StepContext<'_>) -> Result<Stepped, BicaError>;
@@ -51,7 +51,10 @@ impl<S: Copy + Eq + Debug + 'static, D: 'static> StateSpec<S, D> {
     }
 
     /// The state's code, run every step while in this state.
-    pub fn action(mut self, action: impl FnMut(&mut D, &mut StepContext<'_>) -> Result<(), BicaError> + 'static) -> Self {
+    pub fn action(
+        mut self,
+        action: impl FnMut(&mut D, &mut StepContext<'_>) -> Result<(), BicaError> + 'static,
+    ) -> Self {
         self.action = Some(Box::new(action));
         self
     }

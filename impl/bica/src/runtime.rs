@@ -224,9 +224,9 @@ impl<C: Clock> Runtime<C> {
                 let result = self.step_top_level(id, now_ns)?;
                 if let Err(error) = &result {
                     self.step_failures += 1;
-                    let warn = self.last_failure_warning_ns.is_none_or(|last| {
-                        now_ns.saturating_sub(last) >= self.config.scheduler.warning_interval_ns
-                    });
+                    let warn = self
+                        .last_failure_warning_ns
+                        .is_none_or(|last| now_ns.saturating_sub(last) >= self.config.scheduler.warning_interval_ns);
                     if warn {
                         self.last_failure_warning_ns = Some(now_ns);
                         tracing::warn!(failures = self.step_failures, %error, "component step failed");

@@ -8,8 +8,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use crate::core::{ComponentCounters, ComponentId, RunInfo, SchedulerCore};
 use crate::component::Registry;
+use crate::core::{ComponentCounters, ComponentId, RunInfo, SchedulerCore};
 
 /// Recent samples kept per component for percentiles.
 pub const SAMPLE_RING_CAPACITY: usize = 1024;
@@ -100,7 +100,14 @@ impl Statistics {
     }
 
     /// Records one run of `id`.
-    pub fn record_run(&mut self, id: ComponentId, started_ns: u64, finished_ns: u64, cpu_ns: Option<u64>, info: &RunInfo) {
+    pub fn record_run(
+        &mut self,
+        id: ComponentId,
+        started_ns: u64,
+        finished_ns: u64,
+        cpu_ns: Option<u64>,
+        info: &RunInfo,
+    ) {
         let index = id.0 as usize;
         if self.per_component.len() <= index {
             self.per_component.resize_with(index + 1, ComponentSeries::default);
@@ -181,7 +188,16 @@ impl fmt::Display for StatisticsReport {
         writeln!(
             f,
             "{:<28} {:>9} {:>9} {:>7} {:>7} {:>7} {:>10} {:>10} {:>10} {:>10}",
-            "component", "nom Hz", "got Hz", "runs", "misses", "skipped", "wall mean", "wall p99", "wall max", "cpu mean"
+            "component",
+            "nom Hz",
+            "got Hz",
+            "runs",
+            "misses",
+            "skipped",
+            "wall mean",
+            "wall p99",
+            "wall max",
+            "cpu mean"
         )?;
         for c in &self.components {
             let short = c.name.rsplit("::").next().unwrap_or(&c.name);

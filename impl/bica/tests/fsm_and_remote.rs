@@ -74,7 +74,8 @@ fn tracker() -> Fsm<Mode, u32> {
 }
 
 fn fsm_runtime() -> Runtime<VirtualClock> {
-    let mut runtime = Runtime::new(RuntimeConfig { report_interval_ns: 0, ..RuntimeConfig::default() }, VirtualClock::new(0));
+    let mut runtime =
+        Runtime::new(RuntimeConfig { report_interval_ns: 0, ..RuntimeConfig::default() }, VirtualClock::new(0));
     runtime.register(Log::default(), MS).unwrap();
     runtime.register(Sensor::default(), 10 * MS).unwrap();
     runtime.register(Actuator::default(), 10 * MS).unwrap();
@@ -90,7 +91,10 @@ fn fsm_steps_required_components_before_its_action_and_modulated_ones_after() {
     let fsm = runtime.registry().get::<Fsm<Mode, u32>>().unwrap();
     assert_eq!(fsm.current_state(), Mode::Track);
     assert_eq!(fsm.entered_ns(), Some(20 * MS));
-    assert_eq!(runtime.registry().get::<Log>().unwrap().entries, vec!["sensor", "sensor", "sensor", "track-action", "actuator"]);
+    assert_eq!(
+        runtime.registry().get::<Log>().unwrap().entries,
+        vec!["sensor", "sensor", "sensor", "track-action", "actuator"]
+    );
     assert_eq!(runtime.registry().get::<Actuator>().unwrap().command, 3);
 }
 
@@ -127,7 +131,8 @@ fn fsm_restarts_from_its_initial_state_after_reactivation() {
 
 #[test]
 fn fsm_declaration_errors_are_reported() {
-    let undeclared_target = Fsm::builder("bad", Mode::Idle, ()).state(Mode::Idle, |s| s.after_ns(1, Mode::Rest)).build();
+    let undeclared_target =
+        Fsm::builder("bad", Mode::Idle, ()).state(Mode::Idle, |s| s.after_ns(1, Mode::Rest)).build();
     assert!(matches!(undeclared_target, Err(BicaError::InvalidFsm { .. })));
     let missing_initial = Fsm::builder("bad", Mode::Idle, ()).state(Mode::Rest, |s| s).build();
     assert!(matches!(missing_initial, Err(BicaError::InvalidFsm { .. })));
@@ -145,7 +150,8 @@ fn remote_requests_are_served_between_steps_on_the_scheduler_thread() {
     runtime.run_once().unwrap();
     assert_eq!(set.wait().unwrap(), Ok(()));
     assert_eq!(read.wait().unwrap(), Ok(42));
-    let activate_log = remote.submit(|control| control.get::<Sensor>().map(|s| s.value).and(control.activate::<Log>())).unwrap();
+    let activate_log =
+        remote.submit(|control| control.get::<Sensor>().map(|s| s.value).and(control.activate::<Log>())).unwrap();
     runtime.run_once().unwrap();
     assert_eq!(activate_log.wait().unwrap(), Ok(()));
     assert!(runtime.core().active().len() == 2);

@@ -20,7 +20,11 @@ fn spec(period_ns: u64, duration_ns: u64, deps: Vec<usize>) -> WorkerSpec {
 
 fn overrun_runs(mutant: Option<SchedulerMutant>) -> Vec<Run> {
     let mut runtime = runtime_with(mutant, MS);
-    add_worker(&mut runtime, 0, &WorkerSpec { period_ns: 10 * MS, duration_ns: MS, overrun: Some((0, 39 * MS)), deps: vec![] });
+    add_worker(
+        &mut runtime,
+        0,
+        &WorkerSpec { period_ns: 10 * MS, duration_ns: MS, overrun: Some((0, 39 * MS)), deps: vec![] },
+    );
     activate_worker(&mut runtime, 0);
     runtime.run_until(60 * MS).unwrap();
     runs_checking_nesting(&runtime.drain_trace())

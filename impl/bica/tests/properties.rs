@@ -87,7 +87,9 @@ fn run_scenario(scenario: &Scenario) -> (Runtime<VirtualClock>, Vec<TraceEvent>)
 }
 
 /// Top-level only, constant durations, at most one overrun: for the lateness bounds.
-fn flat_strategy(max_total_duration_fraction: Option<u64>) -> impl Strategy<Value = (Vec<WorkerSpec>, usize, u64, u64)> {
+fn flat_strategy(
+    max_total_duration_fraction: Option<u64>,
+) -> impl Strategy<Value = (Vec<WorkerSpec>, usize, u64, u64)> {
     (1usize..=6).prop_flat_map(move |count| {
         let workers: Vec<_> = (0..count).map(|i| worker_strategy(i, count, false)).collect();
         (workers, 0..count, 0u64..5, 1u64..=80_000).prop_map(move |(mut workers, slow, run, extra_us)| {

@@ -87,7 +87,11 @@ fn shared_dependency_runs_its_gated_work_once_per_period() {
 fn overrun_skips_missed_releases_without_a_catch_up_burst_and_reports_the_miss() {
     let mut runtime = virtual_runtime(SchedulerConfig { miss_tolerance_ns: MS, ..SchedulerConfig::default() });
     // Worker 0 overruns on its first run: 35 ms instead of 1 ms.
-    let slow = add_worker(&mut runtime, 0, &WorkerSpec { period_ns: 10 * MS, duration_ns: MS, overrun: Some((0, 34 * MS)), deps: vec![] });
+    let slow = add_worker(
+        &mut runtime,
+        0,
+        &WorkerSpec { period_ns: 10 * MS, duration_ns: MS, overrun: Some((0, 34 * MS)), deps: vec![] },
+    );
     let victim = add_worker(&mut runtime, 1, &spec(10 * MS, MS, vec![]));
     activate_worker(&mut runtime, 0);
     activate_worker(&mut runtime, 1);
@@ -153,7 +157,9 @@ fn removed_component_simply_stops_and_short_gap_is_not_a_reactivation() {
     deactivate_worker(&mut runtime, 1);
     runtime.run_until(65 * MS).unwrap();
     assert_eq!(worker_runs(&runtime, 1), 2, "a removed component is not stepped");
-    assert!(runtime.drain_trace().iter().all(|e| !matches!(e, TraceEvent::StepStarted { component, at_ns, .. } if *component == removed && *at_ns >= 15 * MS)));
+    assert!(runtime.drain_trace().iter().all(
+        |e| !matches!(e, TraceEvent::StepStarted { component, at_ns, .. } if *component == removed && *at_ns >= 15 * MS)
+    ));
     // 50 ms = 5 periods < 10: back without a reactivation notice, on a fresh grid, no miss.
     activate_worker(&mut runtime, 1);
     runtime.run_until(100 * MS).unwrap();
@@ -177,7 +183,10 @@ fn component_reactivated_after_more_than_ten_periods_is_told_the_gap() {
     runtime.run_until(205 * MS).unwrap();
     assert_eq!(worker_reactivations(&runtime, 1), vec![195 * MS]);
     let trace = runtime.drain_trace();
-    assert!(trace.contains(&TraceEvent::Reactivated { component: returning, at_ns: 201 * MS, gap_ns: 195 * MS }), "{trace:?}");
+    assert!(
+        trace.contains(&TraceEvent::Reactivated { component: returning, at_ns: 201 * MS, gap_ns: 195 * MS }),
+        "{trace:?}"
+    );
     assert_eq!(runtime.core().counters(returning).unwrap().misses, 0, "being inactive is not a miss");
 }
 
@@ -260,7 +269,10 @@ fn stepping_an_unregistered_component_is_an_error() {
     runtime.register(StepsUnregistered, MS).unwrap();
     runtime.activate::<StepsUnregistered>().unwrap();
     let outcome = runtime.run_once().unwrap();
-    assert!(matches!(outcome, RunOutcome::Stepped { result: Err(BicaError::UnknownComponent { .. }), .. }), "{outcome:?}");
+    assert!(
+        matches!(outcome, RunOutcome::Stepped { result: Err(BicaError::UnknownComponent { .. }), .. }),
+        "{outcome:?}"
+    );
     assert!(matches!(runtime.activate::<CycleA>(), Err(BicaError::UnknownComponent { .. })));
 }
 
@@ -321,8 +333,13 @@ fn miss_warnings_are_rate_limited_but_every_miss_is_counted() {
     assert_eq!(counters.misses, 100);
     assert_eq!(counters.warnings, 10, "one warning per 100 ms");
     let trace = runtime.drain_trace();
-    let warned: Vec<MissEvent> =
-        trace.iter().filter_map(|e| match e { TraceEvent::Miss(m) if m.warn => Some(*m), _ => None }).collect();
+    let warned: Vec<MissEvent> = trace
+        .iter()
+        .filter_map(|e| match e {
+            TraceEvent::Miss(m) if m.warn => Some(*m),
+            _ => None,
+        })
+        .collect();
     assert_eq!(warned[1].suppressed_since_last_warning, 9);
 }
 
@@ -345,7 +362,11 @@ fn statistics_report_achieved_frequency_and_step_times() {
 fn identical_inputs_give_identical_traces() {
     let run = || {
         let mut runtime = virtual_runtime(SchedulerConfig::default());
-        add_worker(&mut runtime, 0, &WorkerSpec { period_ns: 7 * MS, duration_ns: 2 * MS, overrun: Some((3, 20 * MS)), deps: vec![2] });
+        add_worker(
+            &mut runtime,
+            0,
+            &WorkerSpec { period_ns: 7 * MS, duration_ns: 2 * MS, overrun: Some((3, 20 * MS)), deps: vec![2] },
+        );
         add_worker(&mut runtime, 1, &spec(5 * MS, MS, vec![2]));
         add_worker(&mut runtime, 2, &spec(3 * MS, MS, vec![]));
         activate_worker(&mut runtime, 0);

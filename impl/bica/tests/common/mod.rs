@@ -19,7 +19,14 @@ pub struct Worker<const N: usize> {
 
 impl<const N: usize> Worker<N> {
     pub fn new(clock: &VirtualClock, duration_ns: u64) -> Self {
-        Self { clock: clock.clone(), duration_ns, overrun: None, deps: Vec::new(), runs: 0, reactivation_gaps_ns: Vec::new() }
+        Self {
+            clock: clock.clone(),
+            duration_ns,
+            overrun: None,
+            deps: Vec::new(),
+            runs: 0,
+            reactivation_gaps_ns: Vec::new(),
+        }
     }
 }
 
@@ -60,14 +67,38 @@ pub struct WorkerSpec {
 macro_rules! by_index {
     ($index:expr, $n:ident => $body:expr) => {
         match $index {
-            0 => { const $n: usize = 0; $body }
-            1 => { const $n: usize = 1; $body }
-            2 => { const $n: usize = 2; $body }
-            3 => { const $n: usize = 3; $body }
-            4 => { const $n: usize = 4; $body }
-            5 => { const $n: usize = 5; $body }
-            6 => { const $n: usize = 6; $body }
-            7 => { const $n: usize = 7; $body }
+            0 => {
+                const $n: usize = 0;
+                $body
+            }
+            1 => {
+                const $n: usize = 1;
+                $body
+            }
+            2 => {
+                const $n: usize = 2;
+                $body
+            }
+            3 => {
+                const $n: usize = 3;
+                $body
+            }
+            4 => {
+                const $n: usize = 4;
+                $body
+            }
+            5 => {
+                const $n: usize = 5;
+                $body
+            }
+            6 => {
+                const $n: usize = 6;
+                $body
+            }
+            7 => {
+                const $n: usize = 7;
+                $body
+            }
             other => panic!("test fixture supports {MAX_WORKERS} workers, got index {other}"),
         }
     };
@@ -147,7 +178,15 @@ pub fn runs_checking_nesting(trace: &[TraceEvent]) -> Vec<Run> {
                 }
                 assert!(!stack.iter().any(|&i| runs[i].component == component), "{component:?} overlaps itself");
                 stack.push(runs.len());
-                runs.push(Run { component, caller, started_ns: at_ns, finished_ns: 0, release_ns, lateness_ns, skipped_periods });
+                runs.push(Run {
+                    component,
+                    caller,
+                    started_ns: at_ns,
+                    finished_ns: 0,
+                    release_ns,
+                    lateness_ns,
+                    skipped_periods,
+                });
             }
             TraceEvent::StepFinished { component, at_ns } => {
                 assert!(at_ns >= last_time);
