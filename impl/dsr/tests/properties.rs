@@ -1,7 +1,7 @@
 //! Property tests: lattice laws of the join, convergence under any delivery order with duplicates, the graph
 //! invariants after every step, and decoding of arbitrary bytes.
 //!
-//! The crate is built here with `check-invariants`, so every local operation and join also walks the invariants.
+//! Every step of a random run walks the full invariants of every replica (`Replica::check_invariants`).
 
 use std::sync::Arc;
 

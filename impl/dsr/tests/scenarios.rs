@@ -179,3 +179,25 @@ fn change_events_report_local_and_remote_changes() {
     assert_eq!(changes, vec![Change::NodeDeleted { id: y }, Change::EdgeDeleted { key: EdgeKey::new(x, y, "in") }]);
     let _ = NodeId(0);
 }
+
+/// Size is deterministic, so the target is pinned here (the C++ implementation sends 112 B of CDR for one int).
+#[test]
+fn one_f32_attribute_update_encodes_in_at_most_40_bytes() {
+    let mut a = Replica::new(ReplicaId(3));
+    let mut ids = Vec::new();
+    for i in 0..300 {
+        let (id, _) = a.insert_node(1_700_000_000_000_000_000 + i, NewNode::new("object", &format!("n{i}"))).unwrap();
+        ids.push(id);
+    }
+    let mut sizes = Vec::new();
+    for (i, id) in ids.iter().enumerate().take(100) {
+        for k in 0..3 {
+            let now = 1_800_000_000_000_000_000 + (i * 3 + k) as u64;
+            let delta = a.set_attr(now, *id, attrs::POS_X, k as f32 + 0.5).unwrap();
+            sizes.push(delta.encode().len());
+        }
+    }
+    let max = *sizes.iter().max().unwrap();
+    eprintln!("f32 attribute delta: min {} max {max} bytes", sizes.iter().min().unwrap());
+    assert!(max <= 40, "an f32 update took {max} bytes");
+}
