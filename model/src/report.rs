@@ -153,8 +153,11 @@ impl<M: Model> Reporter<M> for ProgressLine {
         }
     }
 
-    fn report_discoveries(&mut self, _model: &M, _discoveries: std::collections::BTreeMap<&'static str, ReportDiscovery<M>>)
-    where
+    fn report_discoveries(
+        &mut self,
+        _model: &M,
+        _discoveries: std::collections::BTreeMap<&'static str, ReportDiscovery<M>>,
+    ) where
         M::Action: Debug + PartialEq,
         M::State: Debug + Hash + PartialEq,
     {
@@ -175,10 +178,31 @@ where
     }
     let started = Instant::now();
     let mut progress = ProgressLine { enabled: options.progress };
-    let checker = match options.search {
-        Search::Dfs => builder.spawn_dfs().join_and_report(&mut progress),
-        Search::Bfs => builder.spawn_bfs().join_and_report(&mut progress),
-    };
+    match options.search {
+        Search::Dfs => {
+            let checker = builder.spawn_dfs().join_and_report(&mut progress);
+            summarize(checker, &properties, started, name, configuration, options)
+        }
+        Search::Bfs => {
+            let checker = builder.spawn_bfs().join_and_report(&mut progress);
+            summarize(checker, &properties, started, name, configuration, options)
+        }
+    }
+}
+
+fn summarize<M, C>(
+    checker: C,
+    properties: &[stateright::Property<M>],
+    started: Instant,
+    name: &str,
+    configuration: serde_json::Value,
+    options: &CheckOptions,
+) -> CheckReport
+where
+    M: Model,
+    M::State: Debug,
+    C: Checker<M>,
+{
     let seconds = started.elapsed().as_secs_f64();
     let discoveries = checker.discoveries();
     let model = checker.model();
