@@ -200,7 +200,8 @@ fn summarize<M, C>(
 ) -> CheckReport
 where
     M: Model,
-    M::State: Debug,
+    M::State: Clone + Debug + Hash + PartialEq,
+    M::Action: Clone + Debug + PartialEq,
     C: Checker<M>,
 {
     let seconds = started.elapsed().as_secs_f64();
