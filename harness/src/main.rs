@@ -1,2 +1,41 @@
-//! The `cortex` command.
-fn main() {}
+//! The `cortex` command: one binary for the project's tools, so that every experiment, check and report is run
+//! the same way. This file only parses the command line and hands each subcommand to its module in
+//! [`commands`]; errors come back as `anyhow` chains and are printed as one line on standard error with exit
+//! code 1 (clap's own usage errors exit with 2).
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod commands;
+
+/// Tools for the DSR_d working memory: CORTEX graphs now; model checks, agents, benchmarks, replays and reports
+/// as they arrive.
+#[derive(Debug, Parser)]
+#[command(name = "cortex", version, about)]
+struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The subcommands. Each lives in its own module under `commands/`.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Inspect and convert CORTEX JSON graphs.
+    Graph(commands::graph::GraphArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let outcome = match cli.command {
+        Command::Graph(args) => commands::graph::run(args),
+    };
+    match outcome {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

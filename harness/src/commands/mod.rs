@@ -1,0 +1,5 @@
+//! One module per `cortex` subcommand; each has an `Args` type for clap and a `run` function that returns an
+//! `anyhow::Result`. Later subcommands (`check`, `agent`, `bench`, `replay`, `report`, `inspect`) go beside
+//! `graph`.
+
+pub mod graph;
