@@ -101,7 +101,7 @@ fn delta_join(c: &mut Criterion) {
                     .collect();
                 let start = Instant::now();
                 for delta in &deltas {
-                    reader.apply(delta).unwrap();
+                    reader.apply_shared(Arc::clone(delta)).unwrap();
                 }
                 elapsed += start.elapsed();
                 left -= chunk;

@@ -130,22 +130,27 @@ impl Default for LogLimits {
     }
 }
 
+/// The retained history: recent deltas (own and received) with their payload sizes, bounded by [`LogLimits`].
 #[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
 struct DeltaLog {
-    deltas: VecDeque<Arc<Delta>>,
+    deltas: VecDeque<(Arc<Delta>, usize)>,
     payload_bytes: usize,
     limits: LogLimits,
 }
 
 impl DeltaLog {
     fn push(&mut self, delta: Arc<Delta>) {
-        self.payload_bytes += delta.payload_bytes();
-        self.deltas.push_back(delta);
+        if self.limits.max_deltas == 0 {
+            return;
+        }
+        let size = delta.payload_bytes();
+        self.payload_bytes += size;
+        self.deltas.push_back((delta, size));
         while self.deltas.len() > self.limits.max_deltas
             || (self.payload_bytes > self.limits.max_payload_bytes && self.deltas.len() > 1)
         {
-            let evicted = self.deltas.pop_front().expect("non-empty log");
-            self.payload_bytes -= evicted.payload_bytes();
+            let (_, evicted) = self.deltas.pop_front().expect("non-empty log");
+            self.payload_bytes -= evicted;
         }
     }
 }
@@ -626,35 +631,28 @@ impl Replica {
     /// [`DeltaError::Dictionary`] if it uses a name or type this replica's dictionary refuses; the replica is then
     /// unchanged. (Structural errors are caught by [`Delta::decode`].)
     pub fn apply(&mut self, delta: &Delta) -> Result<(), DeltaError> {
+        self.apply_inner(delta, || Arc::new(delta.clone()))
+    }
+
+    /// Like [`Replica::apply`], for a delta already shared: it is retained for anti-entropy without a copy.
+    ///
+    /// # Errors
+    /// As [`Replica::apply`].
+    pub fn apply_shared(&mut self, delta: Arc<Delta>) -> Result<(), DeltaError> {
+        self.apply_inner(&delta, || Arc::clone(&delta))
+    }
+
+    fn apply_inner(&mut self, delta: &Delta, shared: impl FnOnce() -> Arc<Delta>) -> Result<(), DeltaError> {
         self.check_names(delta)?;
-        // Register new names only once the whole delta has passed.
-        let register_all = |dictionary: &mut Dictionary, delta: &Delta| -> Result<(), DictionaryError> {
-            for node in delta.store.nodes.values() {
-                for core in &node.core.values {
-                    dictionary.check_node_type(&core.value.node_type)?;
-                }
-                for (name, register) in &node.attrs {
-                    for entry in &register.values {
-                        dictionary.check_attr(name, entry.value.value_type())?;
-                    }
-                }
-            }
-            for (key, edge) in &delta.store.edges {
-                dictionary.check_edge_type(&key.edge_type)?;
-                for (name, register) in &edge.attrs {
-                    for entry in &register.values {
-                        dictionary.check_attr(name, entry.value.value_type())?;
-                    }
-                }
-            }
-            Ok(())
-        };
-        register_all(&mut self.dictionary, delta)
-            .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
+        if self.dictionary.allows_unknown() {
+            // Register new names only once the whole delta has passed.
+            register_names(&mut self.dictionary, delta)
+                .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
+        }
         let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.ctx.contains(dot)));
         self.join(delta);
         if !duplicate && delta.origin.is_some() && !delta.complete {
-            self.log.push(Arc::new(delta.clone()));
+            self.log.push(shared());
         }
         #[cfg(feature = "check-invariants")]
         self.check_invariants().expect("invariants after a join");
@@ -708,16 +706,22 @@ impl Replica {
     fn join(&mut self, delta: &Delta) {
         let plant = self.plant;
         let origin = delta.origin.map(|o| o.replica);
-        let mut touched = self.touched_by(delta);
-        let before = self.changes.is_some().then(|| self.look(&touched));
+        // Change tracking looks at everything the delta may change, before and after; without it, only the
+        // indices are kept up to date, for exactly the entries whose core or existence changed.
+        let watched = self.changes.is_some().then(|| self.touched_by(delta));
+        let before = watched.as_ref().map(|touched| self.look(touched));
+        let mut names_to_reindex: SmallVec<[NodeId; 2]> = SmallVec::new();
+        let mut edges_to_reindex: SmallVec<[EdgeKey; 2]> = SmallVec::new();
 
         // Tombstones first: a deleted node's entries and incident edges go, and nothing for it is accepted again.
         for &id in &delta.store.tombstones {
             if self.store.tombstones.insert(id) {
                 self.store.nodes.remove(&id);
+                names_to_reindex.push(id);
                 if !plant.is(DsrMutant::DeleteKeepsIncidentEdges) {
                     for key in self.incident_edges(id) {
                         self.store.edges.remove(&key);
+                        edges_to_reindex.push(key);
                     }
                 }
             }
@@ -729,7 +733,9 @@ impl Replica {
                 continue;
             }
             let mine = self.store.nodes.entry(*id).or_default();
-            mine.core.join(&theirs.core, &self.ctx, &delta.ctx, plant);
+            if mine.core.join(&theirs.core, &self.ctx, &delta.ctx, plant) {
+                names_to_reindex.push(*id);
+            }
             changed_attrs.clear();
             join_attrs(
                 &mut mine.attrs,
@@ -747,7 +753,9 @@ impl Replica {
         if delta.complete {
             for (id, mine) in self.store.nodes.iter_mut() {
                 if !delta.store.nodes.contains_key(id) {
-                    mine.core.drop_covered(&delta.ctx);
+                    if mine.core.drop_covered(&delta.ctx) {
+                        names_to_reindex.push(*id);
+                    }
                     changed_attrs.clear();
                     drop_covered_attrs(&mut mine.attrs, &delta.ctx, &mut changed_attrs);
                 }
@@ -760,6 +768,7 @@ impl Replica {
             if dead_end && !plant.is(DsrMutant::EdgeToDeletedNodeVisible) {
                 continue;
             }
+            let existed = self.store.edges.contains_key(key);
             let mine = self.store.edges.entry(key.clone()).or_default();
             mine.presence.join(&theirs.presence, &self.ctx, &delta.ctx, plant);
             changed_attrs.clear();
@@ -772,8 +781,12 @@ impl Replica {
                 plant,
                 &mut changed_attrs,
             );
-            if mine.is_empty() {
+            let exists = !mine.is_empty();
+            if !exists {
                 self.store.edges.remove(key);
+            }
+            if exists != existed {
+                edges_to_reindex.push(key.clone());
             }
         }
         if delta.complete {
@@ -782,16 +795,23 @@ impl Replica {
                     mine.presence.drop_covered(&delta.ctx);
                     changed_attrs.clear();
                     drop_covered_attrs(&mut mine.attrs, &delta.ctx, &mut changed_attrs);
+                    if mine.is_empty() {
+                        edges_to_reindex.push(key.clone());
+                    }
                 }
             }
             self.store.edges.retain(|_, edge| !edge.is_empty());
         }
 
         self.ctx.merge(&delta.ctx);
-        self.clock = self.clock.max(delta.max_stamp());
-        self.reindex(&mut touched);
-        if let Some(before) = before {
-            let after = self.look(&touched);
+        if origin != Some(self.id) {
+            // A local operation has already ticked the clock past its own stamp.
+            self.clock = self.clock.max(delta.max_stamp());
+        }
+        self.reindex_edges(&edges_to_reindex);
+        self.reindex_names(&names_to_reindex);
+        if let (Some(before), Some(watched)) = (before, watched) {
+            let after = self.look(&watched);
             self.record_changes(&before, &after, origin);
         }
     }
@@ -898,9 +918,9 @@ impl Replica {
         }
     }
 
-    /// Brings the derived indices (edges by endpoint, names) up to date for the touched elements.
-    fn reindex(&mut self, touched: &mut Touched) {
-        for key in &touched.edges {
+    /// Brings the edge indices up to date for edge entries that appeared or went.
+    fn reindex_edges(&mut self, keys: &[EdgeKey]) {
+        for key in keys {
             if self.store.edges.contains_key(key) {
                 self.out_edges.entry(key.from).or_default().insert(key.clone());
                 self.in_edges.entry(key.to).or_default().insert(key.clone());
@@ -915,7 +935,11 @@ impl Replica {
                 }
             }
         }
-        for id in &touched.nodes {
+    }
+
+    /// Brings the name index up to date for nodes whose core changed or that were deleted.
+    fn reindex_names(&mut self, ids: &[NodeId]) {
+        for id in ids {
             if let Some((name, stamp)) = self.indexed_names.remove(id) {
                 if let Some(holders) = self.names.get_mut(&name) {
                     holders.remove(&(stamp, *id));
@@ -953,7 +977,7 @@ impl Replica {
         }
         let mut selected: Vec<Arc<Delta>> = Vec::new();
         let mut covered = BTreeSet::new();
-        for delta in &self.log.deltas {
+        for (delta, _) in &self.log.deltas {
             let origin = delta.origin.expect("logged deltas have an origin");
             if origin.dots().any(|dot| !peer.contains(dot)) {
                 covered.extend(origin.dots());
@@ -1123,6 +1147,29 @@ impl Replica {
         }
         Ok(())
     }
+}
+
+/// Registers the names of a delta that passed [`Replica::check_names`] (only needed when unknown names are allowed).
+fn register_names(dictionary: &mut Dictionary, delta: &Delta) -> Result<(), DictionaryError> {
+    for node in delta.store.nodes.values() {
+        for core in &node.core.values {
+            dictionary.check_node_type(&core.value.node_type)?;
+        }
+        for (name, register) in &node.attrs {
+            for entry in &register.values {
+                dictionary.check_attr(name, entry.value.value_type())?;
+            }
+        }
+    }
+    for (key, edge) in &delta.store.edges {
+        dictionary.check_edge_type(&key.edge_type)?;
+        for (name, register) in &edge.attrs {
+            for entry in &register.values {
+                dictionary.check_attr(name, entry.value.value_type())?;
+            }
+        }
+    }
+    Ok(())
 }
 
 fn element_store(element: &Element, registers: Attrs) -> Store {
