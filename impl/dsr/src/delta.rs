@@ -311,36 +311,50 @@ fn invalid(place: impl Into<String>, what: impl Into<String>) -> DeltaError {
     DeltaError::InvalidId { place: place.into(), what: what.into() }
 }
 
+fn limit(place: impl Into<String>, what: impl Into<String>) -> DeltaError {
+    DeltaError::Limit { place: place.into(), what: what.into() }
+}
+
 fn check_len(place: &str, len: usize) -> Result<(), DeltaError> {
     if len > MAX_ITEMS {
-        return Err(DeltaError::Limit { place: place.into(), what: format!("{len} items (limit {MAX_ITEMS})") });
+        return Err(limit(place, format!("{len} items (limit {MAX_ITEMS})")));
     }
     Ok(())
 }
 
-fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
-    let origin = match wire.origin {
-        None => None,
-        Some((replica, first, count)) => {
-            if replica == 0 {
-                return Err(invalid("origin", "replica id 0"));
-            }
-            if first == 0 || count == 0 {
-                return Err(invalid("origin", format!("dots {first}+{count} (counters start at 1, count >= 1)")));
-            }
-            let last = first
-                .checked_add(u64::from(count) - 1)
-                .ok_or_else(|| invalid("origin", "dot counter overflows u64"))?;
-            if count as usize > MAX_ITEMS {
-                return Err(DeltaError::Limit { place: "origin".into(), what: format!("{count} dots") });
-            }
-            Some(Origin { replica: ReplicaId(replica), first, last })
+fn check_type_name(place: &str, what: &str, name: &str) -> Result<(), DeltaError> {
+    if name.is_empty() || name.len() > crate::dictionary::MAX_NAME_LEN {
+        return Err(limit(place, format!("{what} of {} bytes (1 to 255 allowed)", name.len())));
+    }
+    Ok(())
+}
+
+/// Turns wire structures back into a delta, checking them; knows the delta's origin and context.
+struct Decoder {
+    origin: Option<Origin>,
+    ctx: CausalContext,
+}
+
+impl Decoder {
+    fn origin(wire: Option<(u32, u64, u32)>) -> Result<Option<Origin>, DeltaError> {
+        let Some((replica, first, count)) = wire else { return Ok(None) };
+        if replica == 0 {
+            return Err(invalid("origin", "replica id 0"));
         }
-    };
-    let dot = |wire_dot: WireDot, place: &dyn Fn() -> String| -> Result<Dot, DeltaError> {
-        match wire_dot {
+        if first == 0 || count == 0 {
+            return Err(invalid("origin", format!("dots {first}+{count} (counters start at 1, count >= 1)")));
+        }
+        if count as usize > MAX_ITEMS {
+            return Err(limit("origin", format!("{count} dots")));
+        }
+        let last = first.checked_add(u64::from(count) - 1).ok_or_else(|| invalid("origin", "dot counter overflows"))?;
+        Ok(Some(Origin { replica: ReplicaId(replica), first, last }))
+    }
+
+    fn dot(&self, wire: WireDot, place: &dyn Fn() -> String) -> Result<Dot, DeltaError> {
+        match wire {
             WireDot::Same(offset) => {
-                let o = origin.ok_or_else(|| invalid(place(), "relative dot in a delta without origin"))?;
+                let o = self.origin.ok_or_else(|| invalid(place(), "relative dot in a delta without origin"))?;
                 let counter = o.first.wrapping_add(offset as u64);
                 if counter == 0 || (offset < 0 && counter >= o.first) || (offset >= 0 && counter < o.first) {
                     return Err(invalid(place(), format!("relative dot offset {offset} leaves the counter range")));
@@ -354,9 +368,99 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
                 Ok(Dot::new(ReplicaId(replica), counter))
             }
         }
-    };
+    }
 
-    check_len("context", wire.vv.len() + wire.cloud.len())?;
+    /// A dot of a stored value: valid, and held by the delta's context.
+    fn stored_dot(&self, wire: WireDot, place: &dyn Fn() -> String) -> Result<Dot, DeltaError> {
+        let dot = self.dot(wire, place)?;
+        if !self.ctx.contains(dot) {
+            return Err(DeltaError::DotOutsideContext { place: place(), dot });
+        }
+        Ok(dot)
+    }
+
+    fn entries<T>(&self, entries: Vec<WireEntry<T>>, place: &dyn Fn() -> String) -> Result<Register<T>, DeltaError> {
+        check_len(&place(), entries.len())?;
+        let mut values: SmallVec<[Entry<T>; 1]> = SmallVec::with_capacity(entries.len());
+        for (index, entry) in entries.into_iter().enumerate() {
+            let entry_place = || format!("{} value {index}", place());
+            let dot = self.stored_dot(entry.dot, &entry_place)?;
+            if values.iter().any(|e| e.dot == dot) {
+                return Err(limit(entry_place(), format!("dot {dot} listed twice")));
+            }
+            values.push(Entry { dot, stamp: Stamp(u64::from_le_bytes(entry.stamp)), value: entry.value });
+        }
+        values.sort_unstable_by_key(|entry| entry.dot);
+        Ok(Register { values })
+    }
+
+    fn attrs(&self, registers: Vec<WireRegister<'_>>, owner: &dyn Fn() -> String) -> Result<Attrs, DeltaError> {
+        check_len(&owner(), registers.len())?;
+        let mut attrs = Attrs::new();
+        for register in registers {
+            let name = match register.name {
+                WireName::Builtin(code) => Dictionary::builtin_attr_name(code)
+                    .ok_or_else(|| invalid(owner(), format!("unknown built-in attribute code {code}")))?,
+                WireName::Text(text) => text,
+            };
+            let place = || format!("{} attribute {name:?}", owner());
+            check_type_name(&place(), "attribute name", name)?;
+            let values = self.entries(register.values, &place)?;
+            if attrs.insert(Name::new(name), values).is_some() {
+                return Err(limit(place(), "attribute listed twice"));
+            }
+        }
+        Ok(attrs)
+    }
+
+    fn node(&self, node: WireNode<'_>) -> Result<(NodeId, NodeEntry), DeltaError> {
+        let id = node.id;
+        if id == 0 {
+            return Err(invalid("node list", "node id 0"));
+        }
+        let owner = || format!("node {id}");
+        let mut core = Register::default();
+        check_len(&owner(), node.core.len())?;
+        for (index, entry) in node.core.into_iter().enumerate() {
+            let place = || format!("node {id} core value {index}");
+            let dot = self.stored_dot(entry.dot, &place)?;
+            let (node_type, name) = entry.value;
+            check_type_name(&place(), "node type", node_type)?;
+            if !crate::replica::valid_node_name(name) {
+                return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
+            }
+            if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == dot) {
+                return Err(limit(place(), format!("dot {dot} listed twice")));
+            }
+            core.values.push(Entry {
+                dot,
+                stamp: Stamp(u64::from_le_bytes(entry.stamp)),
+                value: NodeCore { node_type: Name::new(node_type), name: Name::new(name) },
+            });
+        }
+        core.values.sort_unstable_by_key(|entry| entry.dot);
+        let attrs = self.attrs(node.attrs, &owner)?;
+        Ok((NodeId(id), NodeEntry { core, attrs }))
+    }
+
+    fn edge(&self, edge: WireEdge<'_>) -> Result<(EdgeKey, EdgeEntry), DeltaError> {
+        let place = format!("edge {}->{}", edge.from, edge.to);
+        if edge.from == 0 || edge.to == 0 {
+            return Err(invalid(place, "node id 0"));
+        }
+        check_type_name(&place, "edge type", edge.edge_type)?;
+        let key = EdgeKey::new(NodeId(edge.from), NodeId(edge.to), edge.edge_type);
+        let owner = || format!("edge {key}");
+        let presence = self.entries(edge.presence, &|| format!("edge {key} presence"))?;
+        let attrs = self.attrs(edge.attrs, &owner)?;
+        Ok((key, EdgeEntry { presence, attrs }))
+    }
+}
+
+fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
+    let origin = Decoder::origin(wire.origin)?;
+    let mut decoder = Decoder { origin, ctx: CausalContext::default() };
+    check_len("context", wire.vv.len().saturating_add(wire.cloud.len()))?;
     let mut vv = Vec::with_capacity(wire.vv.len());
     for (replica, counter) in &wire.vv {
         if *replica == 0 {
@@ -366,12 +470,12 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
     }
     let mut cloud = Vec::with_capacity(wire.cloud.len());
     for (index, wire_dot) in wire.cloud.iter().enumerate() {
-        cloud.push(dot(*wire_dot, &|| format!("context dot {index}"))?);
+        cloud.push(decoder.dot(*wire_dot, &|| format!("context dot {index}"))?);
     }
-    let mut ctx = CausalContext::from_parts(vv, cloud);
+    decoder.ctx = CausalContext::from_parts(vv, cloud);
     if let Some(o) = origin {
         for generated in o.dots() {
-            ctx.insert(generated);
+            decoder.ctx.insert(generated);
         }
     }
 
@@ -383,106 +487,20 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
         }
         store.tombstones.insert(NodeId(*id));
     }
-
-    let in_ctx = |d: Dot, place: &dyn Fn() -> String| -> Result<(), DeltaError> {
-        if ctx.contains(d) { Ok(()) } else { Err(DeltaError::DotOutsideContext { place: place(), dot: d }) }
-    };
-    let read_attrs = |registers: Vec<WireRegister<'_>>, owner: &dyn Fn() -> String| -> Result<Attrs, DeltaError> {
-        check_len(&owner(), registers.len())?;
-        let mut attrs = Attrs::new();
-        for register in registers {
-            let name = match register.name {
-                WireName::Builtin(code) => Dictionary::builtin_attr_name(code)
-                    .ok_or_else(|| invalid(owner(), format!("unknown built-in attribute code {code}")))?,
-                WireName::Text(text) => text,
-            };
-            let place = || format!("{} attribute {name:?}", owner());
-            if name.is_empty() || name.len() > crate::dictionary::MAX_NAME_LEN {
-                return Err(DeltaError::Limit { place: place(), what: "attribute name length".into() });
-            }
-            let values = read_entries(register.values, &dot, &in_ctx, &place)?;
-            if attrs.insert(Name::new(name), values).is_some() {
-                return Err(DeltaError::Limit { place: place(), what: "attribute listed twice".into() });
-            }
-        }
-        Ok(attrs)
-    };
-
     check_len("nodes", wire.nodes.len())?;
     for node in wire.nodes {
-        let id = node.id;
-        if id == 0 {
-            return Err(invalid("node list", "node id 0"));
-        }
-        let owner = || format!("node {id}");
-        let mut core = Register::default();
-        for (index, entry) in node.core.into_iter().enumerate() {
-            let place = || format!("node {id} core value {index}");
-            let d = dot(entry.dot, &place)?;
-            in_ctx(d, &place)?;
-            let (node_type, name) = entry.value;
-            if node_type.is_empty() || node_type.len() > crate::dictionary::MAX_NAME_LEN {
-                return Err(DeltaError::Limit { place: place(), what: "node type length".into() });
-            }
-            if !crate::replica::valid_node_name(name) {
-                return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
-            }
-            if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == d) {
-                return Err(DeltaError::Limit { place: place(), what: format!("dot {d} listed twice") });
-            }
-            core.values.push(Entry {
-                dot: d,
-                stamp: Stamp(u64::from_le_bytes(entry.stamp)),
-                value: NodeCore { node_type: Name::new(node_type), name: Name::new(name) },
-            });
-        }
-        core.values.sort_unstable_by_key(|entry| entry.dot);
-        let attrs = read_attrs(node.attrs, &owner)?;
-        if store.nodes.insert(NodeId(id), NodeEntry { core, attrs }).is_some() {
-            return Err(DeltaError::Limit { place: owner(), what: "node listed twice".into() });
+        let (id, entry) = decoder.node(node)?;
+        if store.nodes.insert(id, entry).is_some() {
+            return Err(limit(format!("node {id}"), "node listed twice"));
         }
     }
-
     check_len("edges", wire.edges.len())?;
     for edge in wire.edges {
-        if edge.from == 0 || edge.to == 0 {
-            return Err(invalid(format!("edge {}->{}", edge.from, edge.to), "node id 0"));
+        let (key, entry) = decoder.edge(edge)?;
+        if store.edges.contains_key(&key) {
+            return Err(limit(format!("edge {key}"), "edge listed twice"));
         }
-        if edge.edge_type.is_empty() || edge.edge_type.len() > crate::dictionary::MAX_NAME_LEN {
-            return Err(DeltaError::Limit {
-                place: format!("edge {}->{}", edge.from, edge.to),
-                what: "edge type length".into(),
-            });
-        }
-        let key = EdgeKey::new(NodeId(edge.from), NodeId(edge.to), edge.edge_type);
-        let owner = || format!("edge {key}");
-        let presence = read_entries(edge.presence, &dot, &in_ctx, &|| format!("edge {key} presence"))?;
-        let attrs = read_attrs(edge.attrs, &owner)?;
-        if store.edges.insert(key.clone(), EdgeEntry { presence, attrs }).is_some() {
-            return Err(DeltaError::Limit { place: owner(), what: "edge listed twice".into() });
-        }
+        store.edges.insert(key, entry);
     }
-
-    Ok(Delta { origin, complete, ctx, store })
-}
-
-fn read_entries<T>(
-    entries: Vec<WireEntry<T>>,
-    dot: &dyn Fn(WireDot, &dyn Fn() -> String) -> Result<Dot, DeltaError>,
-    in_ctx: &dyn Fn(Dot, &dyn Fn() -> String) -> Result<(), DeltaError>,
-    place: &dyn Fn() -> String,
-) -> Result<Register<T>, DeltaError> {
-    check_len(&place(), entries.len())?;
-    let mut values: SmallVec<[Entry<T>; 1]> = SmallVec::with_capacity(entries.len());
-    for (index, entry) in entries.into_iter().enumerate() {
-        let entry_place = || format!("{} value {index}", place());
-        let d = dot(entry.dot, &entry_place)?;
-        in_ctx(d, &entry_place)?;
-        if values.iter().any(|e| e.dot == d) {
-            return Err(DeltaError::Limit { place: entry_place(), what: format!("dot {d} listed twice") });
-        }
-        values.push(Entry { dot: d, stamp: Stamp(u64::from_le_bytes(entry.stamp)), value: entry.value });
-    }
-    values.sort_unstable_by_key(|entry| entry.dot);
-    Ok(Register { values })
+    Ok(Delta { origin, complete, ctx: decoder.ctx, store })
 }

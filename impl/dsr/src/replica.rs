@@ -940,12 +940,12 @@ impl Replica {
     /// Brings the name index up to date for nodes whose core changed or that were deleted.
     fn reindex_names(&mut self, ids: &[NodeId]) {
         for id in ids {
-            if let Some((name, stamp)) = self.indexed_names.remove(id) {
-                if let Some(holders) = self.names.get_mut(&name) {
-                    holders.remove(&(stamp, *id));
-                    if holders.is_empty() {
-                        self.names.remove(&name);
-                    }
+            if let Some((name, stamp)) = self.indexed_names.remove(id)
+                && let Some(holders) = self.names.get_mut(&name)
+            {
+                holders.remove(&(stamp, *id));
+                if holders.is_empty() {
+                    self.names.remove(&name);
                 }
             }
             if !self.node_visible(*id) {
@@ -1075,7 +1075,7 @@ impl Replica {
                     let winner = register.winner_planted(self.plant)?;
                     let mut concurrent: Vec<(Stamp, ReplicaId, Value)> =
                         register.values.iter().map(|e| (e.stamp, e.dot.replica, e.value.clone())).collect();
-                    concurrent.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+                    concurrent.sort_by_key(|(stamp, replica, _)| (*stamp, *replica));
                     Some((name.clone(), VisibleAttr { value: winner.value.clone(), concurrent }))
                 })
                 .collect()

@@ -385,7 +385,7 @@ mod f32_slice {
             f.write_str("a byte string of little-endian f32 values")
         }
         fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[f32]>, E> {
-            if bytes.len() % 4 != 0 {
+            if !bytes.len().is_multiple_of(4) {
                 return Err(E::custom(format!("f32 vector of {} bytes is not a multiple of 4", bytes.len())));
             }
             Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
@@ -417,7 +417,7 @@ mod u64_slice {
             f.write_str("a byte string of little-endian u64 values")
         }
         fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[u64]>, E> {
-            if bytes.len() % 8 != 0 {
+            if !bytes.len().is_multiple_of(8) {
                 return Err(E::custom(format!("u64 vector of {} bytes is not a multiple of 8", bytes.len())));
             }
             Ok(bytes
