@@ -4,6 +4,9 @@
 //!
 //! Run: `cargo bench -p dsr`. Each figure is per operation; throughput is reported in elements/s.
 
+// criterion_group! generates an undocumented public function.
+#![allow(missing_docs)]
+
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
