@@ -591,7 +591,7 @@ impl CortexGraph {
             let fields = unique_object(symbol, &path)?;
             let id_path = format!("{path}.id");
             let id = node_id(field(fields, "id", &path)?, &id_path)?;
-            if key.parse::<u64>().ok() != Some(id.0) {
+            if decimal_u64(key) != Some(id.0) {
                 return Err(JsonError::KeyMismatch { path, key: cut(key, 64), id });
             }
             if graph.nodes.contains_key(&id) {
