@@ -1,6 +1,6 @@
 //! The type dictionary: node types, edge types and attribute names with their value types.
 //!
-//! One table ([`builtin_attributes!`] below) is the single source of truth. It generates the typed keys in
+//! One table (the `builtin_attributes!` table below) is the single source of truth. It generates the typed keys in
 //! [`attrs`] — so `replica.set_attr(now, node, attrs::RT_TRANSLATION, "text")` does not compile — and the run-time
 //! table that checks names met in JSON files and network deltas. A [`Dictionary`] starts from the built-in table;
 //! names it does not know are rejected unless the user allows unknown names, in which case an unknown attribute
@@ -344,7 +344,7 @@ impl Dictionary {
     /// Checks a node type, registering it when unknown names are allowed; returns the shared name.
     ///
     /// # Errors
-    /// [`DictionaryError::UnknownNodeType`].
+    /// [`DictionaryError::UnknownType`].
     pub fn check_node_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
         check_type(&mut self.node_types, self.allow_unknown, name, "node type")
     }
@@ -352,7 +352,7 @@ impl Dictionary {
     /// Checks an edge type, registering it when unknown names are allowed; returns the shared name.
     ///
     /// # Errors
-    /// [`DictionaryError::UnknownEdgeType`].
+    /// [`DictionaryError::UnknownType`].
     pub fn check_edge_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
         check_type(&mut self.edge_types, self.allow_unknown, name, "edge type")
     }

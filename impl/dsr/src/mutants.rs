@@ -2,7 +2,7 @@
 //!
 //! Test-only. Without the cargo feature `mutants`, [`Plant`] is a zero-sized value whose `is` is always `false`, so
 //! no mutant can be planted and the compiler removes every check. With the feature, a replica carries the mutant
-//! it was given ([`crate::Replica::plant_mutant`]) and passes it down explicitly: no global state, so tests that
+//! it was given (`Replica::plant_mutant`) and passes it down explicitly: no global state, so tests that
 //! plant different mutants can run side by side.
 
 /// A bug that can be planted in the replica.
