@@ -8,5 +8,9 @@
 //! - [`mutants`]: with the `mutants` feature, plants each known bug and checks that some property fails.
 
 pub mod report;
+pub mod scheduler;
 
 pub use report::{CheckOptions, CheckReport, CounterExample, PropertyResult, Search, run_check};
+pub mod convergence;
+pub mod spec;
+pub use scheduler::{SchedulerModel, SchedulerModelConfig, check_scheduler};

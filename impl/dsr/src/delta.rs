@@ -49,6 +49,9 @@ impl Origin {
 pub struct Delta {
     pub(crate) origin: Option<Origin>,
     pub(crate) complete: bool,
+    /// The sender's hybrid-logical-clock stamp when it made the delta. A receiver's clock moves past it, so an
+    /// operation that has seen this delta stamps after it — even when the delta holds no stamped value (a delete).
+    pub(crate) clock: Stamp,
     pub(crate) ctx: CausalContext,
     pub(crate) store: Store,
 }
@@ -93,8 +96,13 @@ impl Delta {
             + self.store.edges.values().map(|e| attrs(&e.attrs)).sum::<usize>()
     }
 
-    /// The highest stamp carried (for the hybrid logical clock).
-    pub(crate) fn max_stamp(&self) -> Stamp {
+    /// The sender's clock when it made the delta.
+    pub fn clock(&self) -> Stamp {
+        self.clock
+    }
+
+    /// The highest stamp of a value carried.
+    pub(crate) fn max_value_stamp(&self) -> Stamp {
         let attrs = |attrs: &Attrs| attrs.values().flat_map(|r| r.values.iter().map(|e| e.stamp)).max();
         let nodes =
             self.store.nodes.values().flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
@@ -156,6 +164,8 @@ impl Delta {
 #[derive(Serialize, Deserialize)]
 struct WireDelta<'a> {
     origin: Option<(u32, u64, u32)>,
+    /// The sender's clock, when it is not the highest value stamp (then it costs one byte).
+    clock: Option<[u8; 8]>,
     vv: Vec<(u32, u64)>,
     cloud: Vec<WireDot>,
     tombstones: Vec<u64>,
@@ -265,6 +275,7 @@ fn to_wire(delta: &Delta) -> WireDelta<'_> {
     }
     WireDelta {
         origin: origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)),
+        clock: (delta.clock != delta.max_value_stamp()).then(|| delta.clock.0.to_le_bytes()),
         vv,
         cloud,
         tombstones: delta.store.tombstones.iter().map(|id| id.0).collect(),
@@ -502,5 +513,10 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
         }
         store.edges.insert(key, entry);
     }
-    Ok(Delta { origin, complete, ctx: decoder.ctx, store })
+    let mut delta = Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, store };
+    delta.clock = match wire.clock {
+        Some(bytes) => Stamp(u64::from_le_bytes(bytes)),
+        None => delta.max_value_stamp(),
+    };
+    Ok(delta)
 }

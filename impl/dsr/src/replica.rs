@@ -342,8 +342,13 @@ impl Replica {
         for counter in first..=last {
             ctx.insert(Dot::new(self.id, counter));
         }
-        let delta =
-            Arc::new(Delta { origin: Some(Origin { replica: self.id, first, last }), complete: false, ctx, store });
+        let delta = Arc::new(Delta {
+            origin: Some(Origin { replica: self.id, first, last }),
+            complete: false,
+            clock: self.clock,
+            ctx,
+            store,
+        });
         self.join(&delta);
         self.log.push(Arc::clone(&delta));
         #[cfg(feature = "check-invariants")]
@@ -806,7 +811,7 @@ impl Replica {
         self.ctx.merge(&delta.ctx);
         if origin != Some(self.id) {
             // A local operation has already ticked the clock past its own stamp.
-            self.clock = self.clock.max(delta.max_stamp());
+            self.clock = self.clock.max(delta.clock);
         }
         self.reindex_edges(&edges_to_reindex);
         self.reindex_names(&names_to_reindex);
@@ -963,7 +968,7 @@ impl Replica {
 
     /// The whole state as a delta: joining it gives a replica everything this one has.
     pub fn snapshot(&self) -> Delta {
-        Delta { origin: None, complete: true, ctx: self.ctx.clone(), store: self.store.clone() }
+        Delta { origin: None, complete: true, clock: self.clock, ctx: self.ctx.clone(), store: self.store.clone() }
     }
 
     /// What a peer whose causal context is `peer` lacks: nothing, a set of retained deltas, or (when the retained

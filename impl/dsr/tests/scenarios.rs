@@ -201,3 +201,19 @@ fn one_f32_attribute_update_encodes_in_at_most_40_bytes() {
     eprintln!("f32 attribute delta: min {} max {max} bytes", sizes.iter().min().unwrap());
     assert!(max <= 40, "an f32 update took {max} bytes");
 }
+
+/// Found by the convergence model: a delete carries no stamped value, yet a replica that has applied it must stamp
+/// its next operation after it.
+#[test]
+fn an_operation_after_a_received_delete_stamps_after_it() {
+    let (mut a, mut b) = pair();
+    let (n, d1) = a.insert_node(0, NewNode::new("object", "x")).unwrap();
+    ship(&d1, &mut b);
+    a.set_attr(0, n, attrs::LEVEL, 1).unwrap();
+    a.set_attr(0, n, attrs::LEVEL, 2).unwrap();
+    let delete = a.delete_node(0, n).unwrap();
+    assert!(delete.clock() > b.clock());
+    ship(&delete, &mut b);
+    let (_, after) = b.insert_node(0, NewNode::new("object", "y")).unwrap();
+    assert!(after.clock() > delete.clock(), "{:?} must be after {:?}", after.clock(), delete.clock());
+}

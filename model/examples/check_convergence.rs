@@ -1,0 +1,19 @@
+//! Runs the convergence model once and prints the report: `cargo run --release -p model --example
+//! check_convergence -- [replicas] [ops] [network]`.
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let mut config = model::convergence::ConvergenceConfig::default();
+    if let Some(n) = args.next() {
+        config.replicas = n.parse().expect("replicas");
+    }
+    if let Some(k) = args.next() {
+        config.ops = k.parse().expect("ops");
+    }
+    if let Some(network) = args.next() {
+        config.network = network.parse().expect("network");
+    }
+    let options = model::CheckOptions { progress: true, ..Default::default() };
+    let report = model::convergence::check_convergence(&config, &options);
+    print!("{}", report.to_text());
+}
