@@ -38,8 +38,6 @@ use crate::report::{CheckOptions, CheckReport, run_check};
 #[cfg(feature = "mutants")]
 use bica::core::SchedulerMutant;
 
-const MS: u64 = 1_000_000;
-
 /// One top-level component of the model.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TopLevelSpec {
@@ -102,26 +100,29 @@ fn serialize_mutant<S: serde::Serializer>(mutant: &Option<SchedulerMutant>, seri
 }
 
 impl Default for SchedulerModelConfig {
-    /// Two 100 Hz parents ("planner", "controller") sharing a 100 Hz dependency ("perception") and an
-    /// independent 50 Hz "logger"; 1 ms nominal work each (2 ms for the logger); an overrun takes 12 ms
-    /// (longer than a period, so releases get skipped); tolerance 4 ms (one round); one overrun and two list
-    /// changes per path; horizon 30 ms.
+    /// Time is counted in nanoseconds of the core's clock but the numbers are kept small (the model is
+    /// scale-free; small numbers keep counterexamples readable and let a lateness of exactly tolerance + 1 ns
+    /// occur). Two parents ("planner", "controller", period 10 ns) share a dependency ("perception", period
+    /// 10 ns) and an independent "logger" has period 20 ns; nominal work takes 1 ns (2 ns for the logger); an
+    /// overrunning run takes 12 ns (longer than a period, so releases are skipped); the tolerance is 4 ns (one
+    /// round, so nominal load never misses); two overruns (so one component can miss twice within the 20 ns
+    /// warning interval) and two list changes per path; k = 1 period; horizon 40 ns.
     fn default() -> Self {
-        let top = |name: &str, period_ms: u64, nominal_ms: u64, calls_dependency: bool| TopLevelSpec {
+        let top = |name: &str, period_ns: u64, nominal_ns: u64, calls_dependency: bool| TopLevelSpec {
             name: name.to_owned(),
-            period_ns: period_ms * MS,
-            nominal_ns: nominal_ms * MS,
+            period_ns,
+            nominal_ns,
             calls_dependency,
         };
         SchedulerModelConfig {
             components: vec![top("planner", 10, 1, true), top("controller", 10, 1, true), top("logger", 20, 2, false)],
-            dependency: DependencySpec { name: "perception".to_owned(), period_ns: 10 * MS, nominal_ns: MS },
-            overrun_ns: 12 * MS,
-            max_overruns: 1,
-            miss_tolerance_ns: 4 * MS,
+            dependency: DependencySpec { name: "perception".to_owned(), period_ns: 10, nominal_ns: 1 },
+            overrun_ns: 12,
+            max_overruns: 2,
+            miss_tolerance_ns: 4,
             reactivation_gap_periods: 1,
-            warning_interval_ns: 20 * MS,
-            horizon_ns: 30 * MS,
+            warning_interval_ns: 20,
+            horizon_ns: 40,
             max_list_changes: 2,
             check_determinism: true,
             #[cfg(feature = "mutants")]
@@ -480,9 +481,9 @@ impl Hash for SchedulerState {
     }
 }
 
-/// Formats nanoseconds as milliseconds (`12ms`, `0.5ms`).
-fn ms(ns: u64) -> String {
-    if ns % MS == 0 { format!("{}ms", ns / MS) } else { format!("{}ms", ns as f64 / MS as f64) }
+/// Formats a time of the virtual clock.
+fn ns(time: u64) -> String {
+    format!("{time}ns")
 }
 
 fn describe_event(names: &[String], event: &TraceEvent) -> String {
@@ -495,30 +496,30 @@ fn describe_event(names: &[String], event: &TraceEvent) -> String {
         TraceEvent::StepStarted { component, caller: c, at_ns, release_ns, lateness_ns, skipped_periods } => format!(
             "{} started at {} ({}), release {}, lateness {}, skipped {}",
             name(component),
-            ms(at_ns),
+            ns(at_ns),
             caller(c),
-            ms(release_ns),
-            ms(lateness_ns),
+            ns(release_ns),
+            ns(lateness_ns),
             skipped_periods
         ),
-        TraceEvent::StepFinished { component, at_ns } => format!("{} finished at {}", name(component), ms(at_ns)),
+        TraceEvent::StepFinished { component, at_ns } => format!("{} finished at {}", name(component), ns(at_ns)),
         TraceEvent::GatedSkip { component, caller: c, at_ns, next_release_ns } => {
-            format!("{} gated at {} ({}), next release {}", name(component), ms(at_ns), caller(c), ms(next_release_ns))
+            format!("{} gated at {} ({}), next release {}", name(component), ns(at_ns), caller(c), ns(next_release_ns))
         }
         TraceEvent::Miss(miss) => format!(
             "MISS {}: expected {}, actual {}, lateness {}, skipped {}, warn {}, suppressed {}",
             name(miss.component),
-            ms(miss.expected_ns),
-            ms(miss.actual_ns),
-            ms(miss.lateness_ns),
+            ns(miss.expected_ns),
+            ns(miss.actual_ns),
+            ns(miss.lateness_ns),
             miss.skipped_periods,
             miss.warn,
             miss.suppressed_since_last_warning
         ),
-        TraceEvent::Activated { component, at_ns } => format!("{} activated at {}", name(component), ms(at_ns)),
-        TraceEvent::Deactivated { component, at_ns } => format!("{} deactivated at {}", name(component), ms(at_ns)),
+        TraceEvent::Activated { component, at_ns } => format!("{} activated at {}", name(component), ns(at_ns)),
+        TraceEvent::Deactivated { component, at_ns } => format!("{} deactivated at {}", name(component), ns(at_ns)),
         TraceEvent::Reactivated { component, at_ns, gap_ns } => {
-            format!("{} told at {} it was reactivated after {}", name(component), ms(at_ns), ms(gap_ns))
+            format!("{} told at {} it was reactivated after {}", name(component), ns(at_ns), ns(gap_ns))
         }
     }
 }
@@ -528,10 +529,10 @@ impl fmt::Debug for SchedulerState {
         writeln!(
             f,
             "time {}, overruns {} (+{} in total), overload ended at {}, list changes {}",
-            ms(self.now_ns),
+            ns(self.now_ns),
             self.overruns,
-            ms(self.overrun_excess_ns),
-            self.overload_end_ns.map_or("-".to_owned(), ms),
+            ns(self.overrun_excess_ns),
+            self.overload_end_ns.map_or("-".to_owned(), ns),
             self.list_changes
         )?;
         writeln!(f, "active list {:?}, rounds {}", self.core.active(), self.core.rounds())?;
@@ -541,7 +542,7 @@ impl fmt::Debug for SchedulerState {
                 f,
                 "{}: next release {}, runs {}, gated {}, skipped {}, misses {}, warnings {}, reactivations {}{}",
                 self.names.get(index).map_or("?", String::as_str),
-                reference.next_release_ns.map_or("-".to_owned(), ms),
+                reference.next_release_ns.map_or("-".to_owned(), ns),
                 counters.runs,
                 counters.gated_skips,
                 counters.skipped_releases,
@@ -660,7 +661,7 @@ impl SchedulerModel {
                     Ok(Decision::SleepUntil(wake)) if wake == until_ns => {}
                     other => audit.fail(
                         Check::Determinism,
-                        format!("the decision at {} changed from sleep until {} to {other:?}", ms(now), ms(until_ns)),
+                        format!("the decision at {} changed from sleep until {} to {other:?}", ns(now), ns(until_ns)),
                     ),
                 }
                 let due: Vec<usize> = (0..self.config.components.len())
@@ -672,7 +673,7 @@ impl SchedulerModel {
                     let names: Vec<&str> = due.iter().map(|&i| self.names[i].as_str()).collect();
                     audit.fail(
                         Check::LatenessBound,
-                        format!("the scheduler sleeps at {} while {names:?} are due", ms(now)),
+                        format!("the scheduler sleeps at {} while {names:?} are due", ns(now)),
                     );
                 }
                 let earliest = (0..self.config.components.len())
@@ -684,8 +685,8 @@ impl SchedulerModel {
                         Check::LatenessBound,
                         format!(
                             "the scheduler sleeps until {} past a release at {}",
-                            ms(until_ns),
-                            ms(earliest.unwrap_or(0))
+                            ns(until_ns),
+                            ns(earliest.unwrap_or(0))
                         ),
                     );
                 }
@@ -720,7 +721,7 @@ impl SchedulerModel {
         match next.core.next_decision(now) {
             Ok(Decision::Step(decided)) if decided == id => {}
             other => {
-                audit.fail(Check::Determinism, format!("the decision at {} changed from {name} to {other:?}", ms(now)));
+                audit.fail(Check::Determinism, format!("the decision at {} changed from {name} to {other:?}", ns(now)));
                 return Some(now);
             }
         }
@@ -729,12 +730,12 @@ impl SchedulerModel {
             Ok(Gate::NotDue { next_release_ns }) => {
                 audit.fail(
                     Check::CallsAccepted,
-                    format!("{name} was decided at {} but its gate is closed until {}", ms(now), ms(next_release_ns)),
+                    format!("{name} was decided at {} but its gate is closed until {}", ns(now), ns(next_release_ns)),
                 );
                 return Some(now);
             }
             Err(error) => {
-                audit.fail(Check::CallsAccepted, format!("begin_step({name}) at {} refused: {error}", ms(now)));
+                audit.fail(Check::CallsAccepted, format!("begin_step({name}) at {} refused: {error}", ns(now)));
                 return Some(now);
             }
         }
@@ -766,7 +767,7 @@ impl SchedulerModel {
             if overrun == Some(OverrunIn::Own) { self.overran(next, time, spec.nominal_ns) } else { spec.nominal_ns };
         time += duration;
         if let Err(error) = next.core.finish_step(id, time) {
-            audit.fail(Check::CallsAccepted, format!("finish_step({name}) at {} refused: {error}", ms(time)));
+            audit.fail(Check::CallsAccepted, format!("finish_step({name}) at {} refused: {error}", ns(time)));
         }
         Some(time)
     }
@@ -864,7 +865,7 @@ impl Audit<'_> {
                     let period = config.period_ns(index);
                     // Overlap.
                     if at_ns < last_time {
-                        self.fail(Check::NoOverlap, format!("{name} starts at {} after {}", ms(at_ns), ms(last_time)));
+                        self.fail(Check::NoOverlap, format!("{name} starts at {} after {}", ns(at_ns), ns(last_time)));
                     }
                     last_time = at_ns;
                     match caller {
@@ -886,7 +887,7 @@ impl Audit<'_> {
                     if caller == Caller::TopLevel && index < top_level && !next.reference[index].active {
                         self.fail(
                             Check::QuietShutdown,
-                            format!("{name} stepped by the scheduler at {} after it was deactivated", ms(at_ns)),
+                            format!("{name} stepped by the scheduler at {} after it was deactivated", ns(at_ns)),
                         );
                     }
                     // The reference's view of this call.
@@ -895,7 +896,7 @@ impl Audit<'_> {
                         if dependency_ran_in_step {
                             self.fail(
                                 Check::SharedDependencyOncePerPeriod,
-                                format!("{name} runs twice in one step at {}", ms(at_ns)),
+                                format!("{name} runs twice in one step at {}", ns(at_ns)),
                             );
                         }
                         dependency_ran_in_step = true;
@@ -904,9 +905,9 @@ impl Audit<'_> {
                                 Check::SharedDependencyOncePerPeriod,
                                 format!(
                                     "{name} runs at {} for {}, but it already ran in this period (next release {})",
-                                    ms(at_ns),
+                                    ns(at_ns),
                                     caller_name(self, caller),
-                                    ms(expected_release)
+                                    ns(expected_release)
                                 ),
                             );
                         }
@@ -918,9 +919,9 @@ impl Audit<'_> {
                             format!(
                                 "{name} runs at {} serving release {}, but its next release on the grid is {} \
                                  (an earlier run already served or dropped that period)",
-                                ms(at_ns),
-                                ms(release_ns),
-                                ms(expected_release)
+                                ns(at_ns),
+                                ns(release_ns),
+                                ns(expected_release)
                             ),
                         );
                     }
@@ -933,12 +934,12 @@ impl Audit<'_> {
                             format!(
                                 "{name} at {}: reports release {}, lateness {}, skipped {}; the grid says release {}, \
                                  lateness {}, skipped {skipped}",
-                                ms(at_ns),
-                                ms(release_ns),
-                                ms(lateness_ns),
+                                ns(at_ns),
+                                ns(release_ns),
+                                ns(lateness_ns),
                                 skipped_periods,
-                                ms(expected_release),
-                                ms(lateness)
+                                ns(expected_release),
+                                ns(lateness)
                             ),
                         );
                     }
@@ -956,10 +957,10 @@ impl Audit<'_> {
                                 Check::LatenessBound,
                                 format!(
                                     "{name} starts {} late at {}, more than the overruns so far ({}) plus one round ({})",
-                                    ms(lateness_ns),
-                                    ms(at_ns),
-                                    ms(previous.overrun_excess_ns),
-                                    ms(round)
+                                    ns(lateness_ns),
+                                    ns(at_ns),
+                                    ns(previous.overrun_excess_ns),
+                                    ns(round)
                                 ),
                             );
                         }
@@ -972,11 +973,11 @@ impl Audit<'_> {
                                 format!(
                                     "{name} released at {} (a period after the overload ended at {}) starts {} late \
                                      with {} skipped; one round is {}",
-                                    ms(release_ns),
-                                    ms(end),
-                                    ms(lateness_ns),
+                                    ns(release_ns),
+                                    ns(end),
+                                    ns(lateness_ns),
                                     skipped_periods,
-                                    ms(round)
+                                    ns(round)
                                 ),
                             );
                         }
@@ -991,8 +992,8 @@ impl Audit<'_> {
                                     Check::MissExactness,
                                     format!(
                                         "miss raised for {name} at lateness {} ≤ tolerance {}",
-                                        ms(lateness_ns),
-                                        ms(tolerance)
+                                        ns(lateness_ns),
+                                        ns(tolerance)
                                     ),
                                 );
                             }
@@ -1006,7 +1007,7 @@ impl Audit<'_> {
                             {
                                 self.fail(
                                     Check::MissExactness,
-                                    format!("miss event {miss:?} does not match the run of {name} at {}", ms(at_ns)),
+                                    format!("miss event {miss:?} does not match the run of {name} at {}", ns(at_ns)),
                                 );
                             }
                             self.warning(next, index, &miss);
@@ -1015,9 +1016,9 @@ impl Audit<'_> {
                             Check::MissExactness,
                             format!(
                                 "no miss raised for {name} starting at {}: lateness {} > tolerance {}",
-                                ms(at_ns),
-                                ms(lateness_ns),
-                                ms(tolerance)
+                                ns(at_ns),
+                                ns(lateness_ns),
+                                ns(tolerance)
                             ),
                         ),
                         None => {}
@@ -1034,11 +1035,11 @@ impl Audit<'_> {
                             Check::ReactivationSignalled,
                             format!(
                                 "{name} runs at {}: signalled gap {:?}, expected gap {:?} (k = {} periods of {})",
-                                ms(at_ns),
-                                signalled.map(|s| ms(s.1)),
-                                expected_gap.map(ms),
+                                ns(at_ns),
+                                signalled.map(|s| ns(s.1)),
+                                expected_gap.map(ns),
                                 config.reactivation_gap_periods,
-                                ms(period)
+                                ns(period)
                             ),
                         );
                     }
@@ -1067,15 +1068,15 @@ impl Audit<'_> {
                                 Check::SharedDependencyOncePerPeriod,
                                 format!(
                                     "{name} gated at {} for {} (gate says next release {}), but release {} is pending",
-                                    ms(at_ns),
+                                    ns(at_ns),
                                     caller_name(self, caller),
-                                    ms(next_release_ns),
-                                    ms(expected_release)
+                                    ns(next_release_ns),
+                                    ns(expected_release)
                                 ),
                             );
                         }
                     } else {
-                        self.fail(Check::CallsAccepted, format!("top-level {name} gated at {}", ms(at_ns)));
+                        self.fail(Check::CallsAccepted, format!("top-level {name} gated at {}", ns(at_ns)));
                     }
                     if pending_miss.take().is_some() {
                         self.fail(Check::MissExactness, format!("miss raised for the gated call of {name}"));
@@ -1099,7 +1100,7 @@ impl Audit<'_> {
         if let Some((component, gap)) = pending_gap {
             self.fail(
                 Check::ReactivationSignalled,
-                format!("{} told of a {} gap without a run", self.name(component), ms(gap)),
+                format!("{} told of a {} gap without a run", self.name(component), ns(gap)),
             );
         }
     }
@@ -1140,7 +1141,7 @@ impl Audit<'_> {
                 Check::CountersNeverLost,
                 format!(
                     "miss of {name} at {}: warn {} with {} suppressed, expected warn {warn} with {suppressed} suppressed",
-                    ms(miss.actual_ns),
+                    ns(miss.actual_ns),
                     miss.warn,
                     miss.suppressed_since_last_warning
                 ),
@@ -1270,21 +1271,21 @@ impl Model for SchedulerModel {
                 };
                 format!(
                     "at {}: step {} ({}{dependency})",
-                    ms(at_ns),
+                    ns(at_ns),
                     spec.name,
                     if overrun == Some(OverrunIn::Own) {
-                        format!("OVERRUNS to {}", ms(self.config.overrun_ns))
+                        format!("OVERRUNS to {}", ns(self.config.overrun_ns))
                     } else {
-                        format!("nominal {}", ms(spec.nominal_ns))
+                        format!("nominal {}", ns(spec.nominal_ns))
                     }
                 )
             }
-            SchedulerAction::Sleep { from_ns, until_ns } => format!("at {}: sleep until {}", ms(from_ns), ms(until_ns)),
+            SchedulerAction::Sleep { from_ns, until_ns } => format!("at {}: sleep until {}", ns(from_ns), ns(until_ns)),
             SchedulerAction::Activate { at_ns, component } => {
-                format!("at {}: activate {}", ms(at_ns), self.config.components[component].name)
+                format!("at {}: activate {}", ns(at_ns), self.config.components[component].name)
             }
             SchedulerAction::Deactivate { at_ns, component } => {
-                format!("at {}: deactivate {}", ms(at_ns), self.config.components[component].name)
+                format!("at {}: deactivate {}", ns(at_ns), self.config.components[component].name)
             }
         }
     }
