@@ -45,12 +45,13 @@ mod mutants {
         assert!(!property.holds, "{name} survived: {:?} holds\n{}", case.expected_property, report.to_text());
         let path = property.path.as_ref().expect("a violated property has a counterexample");
         assert!(!path.actions.is_empty(), "{name}: empty counterexample");
-        assert!(path.last_state.contains("VIOLATION"), "{name}: the last state explains the violation");
+        let explanation = format!("VIOLATION: [{}]", case.expected_property);
+        assert!(path.last_state.contains(&explanation), "{name}: the last state explains the violation");
         eprintln!("{}", report.to_text());
     }
 
     #[test]
-    fn catch_up_burst_is_killed_by_the_rate_limit() {
+    fn catch_up_burst_is_killed_by_skipped_release_accounting() {
         assert_killed("scheduler-catch-up-burst");
     }
 
