@@ -3,14 +3,18 @@
 //!
 //! It is written as the simplest, obviously correct reading of the semantics in the `dsr` crate documentation — no
 //! deltas, no dots, no causal contexts, no joins — so that a bug shared by the implementation and the specification
-//! is unlikely. An operation *sees* another if the second is in the transitive closure of what its replica had
-//! applied when it issued the first. Then:
+//! is unlikely. An operation *saw* another if its replica had applied the other's delta when it issued it (directly:
+//! deltas are not delivered causally, so seeing an operation does not mean seeing everything it saw). Then:
 //!
 //! - a node is visible iff it was inserted and no operation deleted it;
 //! - an edge is visible iff some insert of it was not seen by a delete of it, and both endpoints are visible;
 //! - an attribute write is live iff no later write or removal of the same attribute (nor, for edges, a delete or a
 //!   re-insert of the edge) saw it; the shown value is the live write with the highest (stamp, replica);
 //! - among visible nodes sharing a name, the earliest (insert stamp, id) keeps it and the others are `name#id`.
+//!
+//! Because stamps follow causality transitively (each replica's hybrid logical clock moves past every delta it
+//! applies), the shown value of a register is always the causally latest write; a write that was only seen through a
+//! third replica's unrelated operation may stay listed among the concurrent values beside it.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -129,9 +133,14 @@ impl<'a> CausalOrder<'a> {
         CausalOrder { ops, closure }
     }
 
-    /// Whether `later` saw `earlier`.
+    /// Whether `later` happened after `earlier` (transitively).
     pub fn sees(&self, later: OpId, earlier: OpId) -> bool {
         self.closure.get(&later).is_some_and(|past| past.contains(&earlier))
+    }
+
+    /// Whether `later`'s replica had applied `earlier` when it issued `later`.
+    pub fn applied(&self, later: OpId, earlier: OpId) -> bool {
+        self.ops.iter().any(|op| op.id == later && op.past.contains(&earlier))
     }
 
     /// Whether neither saw the other.
@@ -166,7 +175,6 @@ fn supersedes(later: &OpKind, write: &Write<'_>) -> bool {
 
 /// The visible graph the specification requires after all of `ops` have been applied.
 pub fn visible_graph(ops: &[OpRecord]) -> VisibleGraph {
-    let order = CausalOrder::new(ops);
 
     let deleted: BTreeSet<NodeId> = ops
         .iter()
@@ -188,7 +196,7 @@ pub fn visible_graph(ops: &[OpRecord]) -> VisibleGraph {
     for op in ops {
         if let OpKind::InsertEdge { key, .. } = &op.kind {
             let removed = ops.iter().any(|later| {
-                matches!(&later.kind, OpKind::DeleteEdge { key: k } if k == key) && order.sees(later.id, op.id)
+                matches!(&later.kind, OpKind::DeleteEdge { key: k } if k == key) && later.past.contains(&op.id)
             });
             if !removed && nodes.contains_key(&key.from) && nodes.contains_key(&key.to) {
                 edges.insert(key.clone());
@@ -223,7 +231,7 @@ pub fn visible_graph(ops: &[OpRecord]) -> VisibleGraph {
     }
     let mut live: BTreeMap<(Element, Name), Vec<&Write<'_>>> = BTreeMap::new();
     for write in &writes {
-        let ended = ops.iter().any(|later| order.sees(later.id, write.op.id) && supersedes(&later.kind, write));
+        let ended = ops.iter().any(|later| later.past.contains(&write.op.id) && supersedes(&later.kind, write));
         if !ended {
             live.entry((write.element.clone(), write.name.clone())).or_default().push(write);
         }

@@ -357,6 +357,30 @@ impl Dictionary {
         check_type(&mut self.edge_types, self.allow_unknown, name, "edge type")
     }
 
+    /// The shared name of a known attribute of type `value_type`: `Ok(None)` if the name is unknown.
+    ///
+    /// # Errors
+    /// [`DictionaryError::AttrTypeConflict`] if it is known with another type.
+    pub fn known_attr(&self, name: &str, value_type: ValueType) -> Result<Option<Name>, DictionaryError> {
+        match self.attrs.get_key_value(name) {
+            Some((known_name, known)) if *known == value_type => Ok(Some(known_name.clone())),
+            Some((_, known)) => {
+                Err(DictionaryError::AttrTypeConflict { name: name.to_owned(), known: *known, found: value_type })
+            }
+            None => Ok(None),
+        }
+    }
+
+    /// The shared name of a known node type.
+    pub fn known_node_type(&self, name: &str) -> Option<Name> {
+        self.node_types.get(name).cloned()
+    }
+
+    /// The shared name of a known edge type.
+    pub fn known_edge_type(&self, name: &str) -> Option<Name> {
+        self.edge_types.get(name).cloned()
+    }
+
     /// Checks a node type without registering it.
     ///
     /// # Errors

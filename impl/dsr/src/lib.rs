@@ -60,7 +60,10 @@
 //! has seen; concurrent writes are all kept. Reads return one deterministic winner, the value with the highest
 //! (stamp, replica id, counter); [`NodeRef::concurrent`] exposes the others. Removing an attribute removes the
 //! values seen; a concurrent write survives. Writing to an invisible element is refused locally; remote writes to an
-//! element not yet visible are kept and show once it is.
+//! element not yet visible are kept and show once it is. "Seen" means applied by that replica: deltas are not
+//! delivered causally, so a write that a replica only knows of through a third replica's unrelated operation is not
+//! superseded by it and stays listed among the concurrent values. The winner is still the causally latest write,
+//! because stamps follow causality transitively (below). (Found and pinned by the model in `model/`.)
 //!
 //! **Stamps.** Each replica keeps a hybrid logical clock: a local operation at `now_ns` gets stamp
 //! `max(now_ns, last + 1)`, and every joined delta raises `last` to its highest stamp. A write that has seen another

@@ -159,7 +159,9 @@ impl DeltaLog {
 #[derive(Clone, Debug)]
 pub struct Replica {
     id: ReplicaId,
-    dictionary: Dictionary,
+    /// Shared copy-on-write: replicas are cloned often (the model checker clones one per state) and the dictionary
+    /// changes only when an unknown name is registered.
+    dictionary: Arc<Dictionary>,
     ctx: CausalContext,
     store: Store,
     clock: Stamp,
@@ -232,7 +234,7 @@ impl Replica {
         assert!(id.0 != 0, "replica id 0 is reserved");
         Replica {
             id,
-            dictionary,
+            dictionary: Arc::new(dictionary),
             ctx: CausalContext::default(),
             store: Store::default(),
             clock: Stamp(0),
@@ -265,7 +267,7 @@ impl Replica {
 
     /// The dictionary (to declare names).
     pub fn dictionary_mut(&mut self) -> &mut Dictionary {
-        &mut self.dictionary
+        Arc::make_mut(&mut self.dictionary)
     }
 
     /// The dictionary.
@@ -301,6 +303,28 @@ impl Replica {
 
     // -----------------------------------------------------------------------------------------------------------
     // Local operations.
+
+    /// The shared name of an attribute, registering it (copy-on-write) if it is new and allowed.
+    fn intern_attr(&mut self, name: &str, value_type: crate::value::ValueType) -> Result<Name, DictionaryError> {
+        match self.dictionary.known_attr(name, value_type)? {
+            Some(known) => Ok(known),
+            None => Arc::make_mut(&mut self.dictionary).check_attr(name, value_type),
+        }
+    }
+
+    fn intern_node_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
+        match self.dictionary.known_node_type(name) {
+            Some(known) => Ok(known),
+            None => Arc::make_mut(&mut self.dictionary).check_node_type(name),
+        }
+    }
+
+    fn intern_edge_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
+        match self.dictionary.known_edge_type(name) {
+            Some(known) => Ok(known),
+            None => Arc::make_mut(&mut self.dictionary).check_edge_type(name),
+        }
+    }
 
     fn tick(&mut self, now_ns: u64) -> Stamp {
         self.clock = Stamp(now_ns.max(self.clock.0.saturating_add(1)));
@@ -387,7 +411,7 @@ impl Replica {
             None => self.mint_node_id()?,
         };
         // Validation passed: now register any new names.
-        let node_type = self.dictionary.check_node_type(&node.node_type)?;
+        let node_type = self.intern_node_type(&node.node_type)?;
         let stamp = self.tick(now_ns);
         let first = self.next_counter();
         let mut counter = first;
@@ -400,7 +424,7 @@ impl Replica {
             attrs: Attrs::new(),
         };
         for (name, value) in node.attrs {
-            let name = self.dictionary.check_attr(&name, value.value_type())?;
+            let name = self.intern_attr(&name, value.value_type())?;
             counter += 1;
             entry.attrs.insert(name, Register::single(Dot::new(self.id, counter), stamp, value));
         }
@@ -482,7 +506,7 @@ impl Replica {
         for (name, value) in &attrs {
             self.dictionary.peek_attr(name, value.value_type())?;
         }
-        let edge_type = self.dictionary.check_edge_type(edge_type)?;
+        let edge_type = self.intern_edge_type(edge_type)?;
         let key = EdgeKey { from, to, edge_type };
         if self.edge_visible(&key) {
             return Err(OpError::EdgeExists(key));
@@ -506,7 +530,7 @@ impl Replica {
             }
         }
         for (name, value) in attrs {
-            let name = self.dictionary.check_attr(&name, value.value_type())?;
+            let name = self.intern_attr(&name, value.value_type())?;
             counter += 1;
             entry.attrs.insert(name, Register::single(Dot::new(self.id, counter), stamp, value));
         }
@@ -589,7 +613,7 @@ impl Replica {
         let mut counter = first - 1;
         let mut registers = Attrs::new();
         for (name, value) in attrs {
-            let name = self.dictionary.check_attr(name, value.value_type())?;
+            let name = self.intern_attr(name, value.value_type())?;
             counter += 1;
             registers.insert(name, Register::single(Dot::new(self.id, counter), stamp, value));
         }
@@ -651,7 +675,7 @@ impl Replica {
         self.check_names(delta)?;
         if self.dictionary.allows_unknown() {
             // Register new names only once the whole delta has passed.
-            register_names(&mut self.dictionary, delta)
+            register_names(Arc::make_mut(&mut self.dictionary), delta)
                 .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
         }
         let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.ctx.contains(dot)));

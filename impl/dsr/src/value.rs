@@ -253,10 +253,31 @@ impl PartialEq for Value {
 impl Eq for Value {}
 
 impl std::hash::Hash for Value {
+    /// Consistent with `Eq`: floats hash by their bits.
     fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
-        let mut hasher = blake3::Hasher::new();
-        self.hash_into(&mut hasher);
-        state.write(hasher.finalize().as_bytes());
+        state.write_u8(self.value_type().code());
+        let floats = |state: &mut H, values: &[f32]| {
+            state.write_usize(values.len());
+            for value in values {
+                state.write_u32(value.to_bits());
+            }
+        };
+        match self {
+            Value::String(text) => text.hash(state),
+            Value::I32(value) => value.hash(state),
+            Value::F32(value) => state.write_u32(value.to_bits()),
+            Value::VecF32(values) => floats(state, values),
+            Value::Bool(value) => value.hash(state),
+            Value::Bytes(bytes) => bytes.hash(state),
+            Value::U32(value) => value.hash(state),
+            Value::U64(value) => value.hash(state),
+            Value::F64(value) => state.write_u64(value.to_bits()),
+            Value::VecU64(values) => values.hash(state),
+            Value::F32x2(values) => floats(state, values),
+            Value::F32x3(values) => floats(state, values),
+            Value::F32x4(values) => floats(state, values),
+            Value::F32x6(values) => floats(state, values),
+        }
     }
 }
 
