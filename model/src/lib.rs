@@ -5,12 +5,17 @@
 //!   specification ([`spec`]).
 //! - [`scheduler`]: the real [`bica`] scheduler core runs on a virtual clock with step durations chosen by the
 //!   checker; the properties are the graceful-degradation guarantees of the BICA runtime.
-//! - [`mutants`]: with the `mutants` feature, plants each known bug and checks that some property fails.
+//! - `mutants` (with the `mutants` feature): plants each known bug in the implementation and checks that a model
+//!   kills it.
+//! - [`report`]: runs a checker and reports states, timing and each property's verdict with its counterexample.
 
+pub mod convergence;
+#[cfg(feature = "mutants")]
+pub mod mutants;
 pub mod report;
 pub mod scheduler;
-
-pub use report::{CheckOptions, CheckReport, CounterExample, PropertyResult, Search, run_check};
-pub mod convergence;
 pub mod spec;
+
+pub use convergence::{ConvergenceConfig, NetworkKind, check_convergence};
+pub use report::{CheckOptions, CheckReport, CounterExample, PropertyResult, Search, run_check};
 pub use scheduler::{SchedulerModel, SchedulerModelConfig, check_scheduler};

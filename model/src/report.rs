@@ -140,6 +140,11 @@ struct ProgressLine {
 }
 
 impl<M: Model> Reporter<M> for ProgressLine {
+    /// How often the checker is polled: also the resolution of the reported search time.
+    fn delay(&self) -> Duration {
+        Duration::from_millis(if self.enabled { 1000 } else { 20 })
+    }
+
     fn report_checking(&mut self, data: ReportData) {
         if self.enabled {
             eprintln!(

@@ -1,0 +1,105 @@
+//! The mutant check: plants each known bug in the real implementation and checks that a model kills it, with a
+//! readable counterexample (the shortest: breadth-first, one thread).
+//!
+//! Only with the `mutants` feature, which enables the switches in `dsr` and `bica`; a normal build cannot plant
+//! anything.
+
+use dsr::DsrMutant;
+use serde::Serialize;
+
+use crate::convergence::{ConvergenceConfig, NetworkKind, check_convergence};
+use crate::report::{CheckOptions, CheckReport, CounterExample, Search};
+use crate::scheduler::{check_scheduler, scheduler_mutants};
+
+/// What happened to one mutant.
+#[derive(Clone, Debug, Serialize)]
+pub struct MutantResult {
+    /// The planted bug.
+    pub mutant: String,
+    /// The model that ran it.
+    pub model: String,
+    /// Whether some `always` property failed.
+    pub killed: bool,
+    /// The properties that failed.
+    pub killed_by: Vec<String>,
+    /// The counterexample of the first failed property.
+    pub counterexample: Option<CounterExample>,
+    /// The whole check.
+    pub report: CheckReport,
+}
+
+impl MutantResult {
+    fn from_report(mutant: String, report: CheckReport) -> Self {
+        let failures: Vec<_> = report.failures().filter(|p| p.expectation != "sometimes").cloned().collect();
+        MutantResult {
+            mutant,
+            model: report.model.clone(),
+            killed: !failures.is_empty(),
+            killed_by: failures.iter().map(|p| p.name.clone()).collect(),
+            counterexample: failures.first().and_then(|p| p.path.clone()),
+            report,
+        }
+    }
+}
+
+/// The smallest convergence configuration whose network can expose each replica mutant.
+pub fn dsr_mutant_configs() -> Vec<(DsrMutant, ConvergenceConfig)> {
+    let config = |replicas, ops, network| ConvergenceConfig { replicas, ops, network, ..ConvergenceConfig::default() };
+    DsrMutant::ALL
+        .into_iter()
+        .map(|mutant| {
+            let base = match mutant {
+                // A re-delivered delta is what re-adds a superseded value.
+                DsrMutant::JoinNotIdempotent => config(2, 2, NetworkKind::UnorderedDuplicating),
+                // Only loss makes anti-entropy matter.
+                DsrMutant::AntiEntropySkipsLastDelta => config(2, 1, NetworkKind::Lossy),
+                DsrMutant::RemoveLosesContext | DsrMutant::DeleteKeepsIncidentEdges => {
+                    config(2, 1, NetworkKind::UnorderedNonduplicating)
+                }
+                DsrMutant::TieBreakByArrival | DsrMutant::EdgeToDeletedNodeVisible => {
+                    config(2, 2, NetworkKind::UnorderedNonduplicating)
+                }
+            };
+            (mutant, base.with_mutant(mutant))
+        })
+        .collect()
+}
+
+/// Options for mutant runs: breadth-first on one thread, so each counterexample is a shortest one.
+pub fn mutant_options(progress: bool) -> CheckOptions {
+    CheckOptions { search: Search::Bfs, threads: 1, timeout: None, progress }
+}
+
+/// Runs every replica mutant through the convergence model.
+pub fn check_dsr_mutants(progress: bool) -> Vec<MutantResult> {
+    dsr_mutant_configs()
+        .into_iter()
+        .map(|(mutant, config)| {
+            let report = check_convergence(&config, &mutant_options(progress));
+            MutantResult::from_report(format!("dsr::{mutant:?}"), report)
+        })
+        .collect()
+}
+
+/// Runs every scheduler mutant through the scheduler model.
+pub fn check_scheduler_mutants(progress: bool) -> Vec<MutantResult> {
+    scheduler_mutants()
+        .into_iter()
+        .map(|case| {
+            let report = check_scheduler(case.config, &mutant_options(progress));
+            let mut result = MutantResult::from_report(format!("bica::{}", case.name), report);
+            // Report the property the mutant is meant to break first, when it is among the failures.
+            if let Some(expected) = result.report.failures().find(|p| p.name == case.expected_property) {
+                result.counterexample = expected.path.clone();
+            }
+            result
+        })
+        .collect()
+}
+
+/// Runs every mutant of both models.
+pub fn check_all_mutants(progress: bool) -> Vec<MutantResult> {
+    let mut results = check_dsr_mutants(progress);
+    results.extend(check_scheduler_mutants(progress));
+    results
+}
