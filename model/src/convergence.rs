@@ -471,9 +471,11 @@ fn stamps_follow_causality(_: &ActorModel<ReplicaActor, Setup>, state: &State) -
     // Each replica's own operations, with every operation it had seen: those are the pairs a stamp must order.
     let stamps: BTreeMap<OpId, dsr::Stamp> =
         state.actor_states.iter().flat_map(|s| s.issued.iter().map(|op| (op.id, op.stamp))).collect();
-    state.actor_states.iter().flat_map(|s| s.issued.iter()).all(|op| {
-        op.past.iter().all(|earlier| stamps.get(earlier).is_none_or(|stamp| *stamp < op.stamp))
-    })
+    state
+        .actor_states
+        .iter()
+        .flat_map(|s| s.issued.iter())
+        .all(|op| op.past.iter().all(|earlier| stamps.get(earlier).is_none_or(|stamp| *stamp < op.stamp)))
 }
 
 fn quiescent_replicas_converge(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {

@@ -175,7 +175,6 @@ fn supersedes(later: &OpKind, write: &Write<'_>) -> bool {
 
 /// The visible graph the specification requires after all of `ops` have been applied.
 pub fn visible_graph(ops: &[OpRecord]) -> VisibleGraph {
-
     let deleted: BTreeSet<NodeId> = ops
         .iter()
         .filter_map(|op| match op.kind {
