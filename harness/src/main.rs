@@ -24,12 +24,15 @@ struct Cli {
 enum Command {
     /// Inspect and convert CORTEX JSON graphs.
     Graph(commands::graph::GraphArgs),
+    /// Model-check the real implementation (convergence, scheduler, mutants).
+    Check(commands::check::CheckArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let outcome = match cli.command {
         Command::Graph(args) => commands::graph::run(args),
+        Command::Check(args) => commands::check::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -134,21 +134,24 @@ fn indent(text: &str, spaces: usize) -> String {
     text.lines().map(|line| format!("{pad}{line}")).collect::<Vec<_>>().join("\n")
 }
 
-/// Prints one progress line per second to standard error.
+/// Polls the checker every 20 ms (the resolution of the reported search time) and prints a progress line to
+/// standard error at most once a second.
 struct ProgressLine {
     enabled: bool,
+    last_printed: Option<Instant>,
 }
 
 impl<M: Model> Reporter<M> for ProgressLine {
-    /// How often the checker is polled: also the resolution of the reported search time.
     fn delay(&self) -> Duration {
-        Duration::from_millis(if self.enabled { 1000 } else { 20 })
+        Duration::from_millis(20)
     }
 
     fn report_checking(&mut self, data: ReportData) {
-        if self.enabled {
+        let due = self.last_printed.is_none_or(|at| at.elapsed() >= Duration::from_secs(1));
+        if self.enabled && (due || data.done) {
+            self.last_printed = Some(Instant::now());
             eprintln!(
-                "  … {} states explored, {} unique, depth {}, {:.0} s{}",
+                "  … {} states explored, {} unique, depth {}, {:.1} s{}",
                 data.total_states,
                 data.unique_states,
                 data.max_depth,
@@ -182,7 +185,7 @@ where
         builder = builder.timeout(timeout);
     }
     let started = Instant::now();
-    let mut progress = ProgressLine { enabled: options.progress };
+    let mut progress = ProgressLine { enabled: options.progress, last_printed: None };
     match options.search {
         Search::Dfs => {
             let checker = builder.spawn_dfs().join_and_report(&mut progress);

@@ -2,4 +2,5 @@
 //! `anyhow::Result`. Later subcommands (`check`, `agent`, `bench`, `replay`, `report`, `inspect`) go beside
 //! `graph`.
 
+pub mod check;
 pub mod graph;
