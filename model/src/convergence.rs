@@ -430,7 +430,7 @@ fn settled_replicas(setup: &Setup, state: &State) -> Vec<Replica> {
                     if from == to {
                         continue;
                     }
-                    let missing = replicas[from].missing_for(replicas[to].context());
+                    let missing = replicas[from].missing_for(replicas[to].applied());
                     let target = &mut replicas[to];
                     match missing {
                         Missing::UpToDate => {}

@@ -53,6 +53,8 @@ pub struct Delta {
     /// operation that has seen this delta stamps after it — even when the delta holds no stamped value (a delete).
     pub(crate) clock: Stamp,
     pub(crate) ctx: CausalContext,
+    /// For a snapshot: the operations its sender had joined (see [`crate::Replica::applied`]); empty otherwise.
+    pub(crate) applied: CausalContext,
     pub(crate) store: Store,
 }
 
@@ -70,6 +72,11 @@ impl Delta {
     /// The causal context: the dots this delta adds or removes.
     pub fn context(&self) -> &CausalContext {
         &self.ctx
+    }
+
+    /// For a snapshot, the operations its sender had joined; empty for the delta of one operation.
+    pub fn applied(&self) -> &CausalContext {
+        &self.applied
     }
 
     /// The dot store (for inspection and tests).
@@ -166,6 +173,8 @@ struct WireDelta<'a> {
     origin: Option<(u32, u64, u32)>,
     /// The sender's clock, when it is not the highest value stamp (then it costs one byte).
     clock: Option<[u8; 8]>,
+    /// A snapshot's joined operations (version vector, then out-of-order dots); one byte otherwise.
+    applied: Option<(Vec<(u32, u64)>, Vec<(u32, u64)>)>,
     vv: Vec<(u32, u64)>,
     cloud: Vec<WireDot>,
     tombstones: Vec<u64>,
@@ -276,6 +285,12 @@ fn to_wire(delta: &Delta) -> WireDelta<'_> {
     WireDelta {
         origin: origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)),
         clock: (delta.clock != delta.max_value_stamp()).then(|| delta.clock.0.to_le_bytes()),
+        applied: (!delta.applied.is_empty()).then(|| {
+            (
+                delta.applied.version_vector().iter().map(|(r, c)| (r.0, *c)).collect(),
+                delta.applied.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
+            )
+        }),
         vv,
         cloud,
         tombstones: delta.store.tombstones.iter().map(|id| id.0).collect(),
@@ -513,7 +528,23 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
         }
         store.edges.insert(key, entry);
     }
-    let mut delta = Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, store };
+    let applied = match wire.applied {
+        None => CausalContext::default(),
+        Some((vv, cloud)) => {
+            check_len("applied operations", vv.len().saturating_add(cloud.len()))?;
+            if vv.iter().chain(&cloud).any(|(replica, _)| *replica == 0) {
+                return Err(invalid("applied operations", "replica id 0"));
+            }
+            if cloud.iter().any(|(_, counter)| *counter == 0) {
+                return Err(invalid("applied operations", "dot counter 0"));
+            }
+            CausalContext::from_parts(
+                vv.into_iter().map(|(r, c)| (ReplicaId(r), c)).collect(),
+                cloud.into_iter().map(|(r, c)| Dot::new(ReplicaId(r), c)).collect(),
+            )
+        }
+    };
+    let mut delta = Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, applied, store };
     delta.clock = match wire.clock {
         Some(bytes) => Stamp(u64::from_le_bytes(bytes)),
         None => delta.max_value_stamp(),

@@ -163,6 +163,10 @@ pub struct Replica {
     /// changes only when an unknown name is registered.
     dictionary: Arc<Dictionary>,
     ctx: CausalContext,
+    /// The operations whose deltas this replica has joined (their generated dots), and everything a joined
+    /// snapshot's sender had joined. Anti-entropy compares these, not causal contexts: a delta's context also holds
+    /// the dots it removed, so a context can cover an operation whose own delta (and what it removed) never came.
+    applied: CausalContext,
     store: Store,
     clock: Stamp,
     minted_nodes: u32,
@@ -181,6 +185,7 @@ impl PartialEq for Replica {
     fn eq(&self, other: &Replica) -> bool {
         self.id == other.id
             && self.ctx == other.ctx
+            && self.applied == other.applied
             && self.store == other.store
             && self.clock == other.clock
             && self.minted_nodes == other.minted_nodes
@@ -195,6 +200,7 @@ impl std::hash::Hash for Replica {
     fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
         self.id.hash(state);
         self.ctx.hash(state);
+        self.applied.hash(state);
         self.store.hash(state);
         self.clock.hash(state);
         self.minted_nodes.hash(state);
@@ -236,6 +242,7 @@ impl Replica {
             id,
             dictionary: Arc::new(dictionary),
             ctx: CausalContext::default(),
+            applied: CausalContext::default(),
             store: Store::default(),
             clock: Stamp(0),
             minted_nodes: 0,
@@ -275,9 +282,15 @@ impl Replica {
         &self.dictionary
     }
 
-    /// The causal context: every dot this replica has seen. Its version vector is what anti-entropy exchanges.
+    /// The causal context: every dot this replica has seen, as added or as removed.
     pub fn context(&self) -> &CausalContext {
         &self.ctx
+    }
+
+    /// The operations whose deltas this replica has joined (their generated dots): what anti-entropy exchanges
+    /// ([`Replica::missing_for`]). Usually a plain version vector.
+    pub fn applied(&self) -> &CausalContext {
+        &self.applied
     }
 
     /// The last hybrid-logical-clock stamp this replica produced or saw.
@@ -371,9 +384,13 @@ impl Replica {
             complete: false,
             clock: self.clock,
             ctx,
+            applied: CausalContext::default(),
             store,
         });
         self.join(&delta);
+        for dot in delta.origin.iter().flat_map(Origin::dots) {
+            self.applied.insert(dot);
+        }
         self.log.push(Arc::clone(&delta));
         #[cfg(feature = "check-invariants")]
         self.check_invariants().expect("invariants after a local operation");
@@ -678,8 +695,14 @@ impl Replica {
             register_names(Arc::make_mut(&mut self.dictionary), delta)
                 .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
         }
-        let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.ctx.contains(dot)));
+        let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)));
         self.join(delta);
+        for dot in delta.origin.iter().flat_map(Origin::dots) {
+            self.applied.insert(dot);
+        }
+        if delta.complete {
+            self.applied.merge(&delta.applied);
+        }
         if !duplicate && delta.origin.is_some() && !delta.complete {
             self.log.push(shared());
         }
@@ -992,13 +1015,20 @@ impl Replica {
 
     /// The whole state as a delta: joining it gives a replica everything this one has.
     pub fn snapshot(&self) -> Delta {
-        Delta { origin: None, complete: true, clock: self.clock, ctx: self.ctx.clone(), store: self.store.clone() }
+        Delta {
+            origin: None,
+            complete: true,
+            clock: self.clock,
+            ctx: self.ctx.clone(),
+            applied: self.applied.clone(),
+            store: self.store.clone(),
+        }
     }
 
-    /// What a peer whose causal context is `peer` lacks: nothing, a set of retained deltas, or (when the retained
-    /// history does not cover the gap) a snapshot.
+    /// What a peer whose joined operations are `peer` (its [`Replica::applied`]) lacks: nothing, a set of retained
+    /// deltas, or (when the retained history does not cover the gap) a snapshot.
     pub fn missing_for(&self, peer: &CausalContext) -> Missing {
-        let Some(missing) = self.ctx.missing_from(peer, self.log.deltas.len().max(1) * 4) else {
+        let Some(missing) = self.applied.missing_from(peer, self.log.deltas.len().max(1) * 4) else {
             return Missing::Snapshot(self.snapshot());
         };
         if missing.is_empty() {

@@ -133,7 +133,7 @@ fn anti_entropy_recovers_a_lost_delta() {
     let d3 = a.set_attr(3, n, attrs::POS_X, 1.5).unwrap();
     ship(&d1, &mut b);
     ship(&d3, &mut b);
-    match a.missing_for(b.context()) {
+    match a.missing_for(b.applied()) {
         dsr::Missing::Deltas(deltas) => {
             assert_eq!(deltas.len(), 1);
             for d in deltas {
@@ -143,7 +143,7 @@ fn anti_entropy_recovers_a_lost_delta() {
         other => panic!("expected deltas, got {other:?}"),
     }
     assert_eq!(a.digest(), b.digest());
-    assert!(matches!(a.missing_for(b.context()), dsr::Missing::UpToDate));
+    assert!(matches!(a.missing_for(b.applied()), dsr::Missing::UpToDate));
 }
 
 #[test]
@@ -216,4 +216,30 @@ fn an_operation_after_a_received_delete_stamps_after_it() {
     ship(&delete, &mut b);
     let (_, after) = b.insert_node(0, NewNode::new("object", "y")).unwrap();
     assert!(after.clock() > delete.clock(), "{:?} must be after {:?}", after.clock(), delete.clock());
+}
+
+/// Found by the convergence model (lossy network): a removal delivered without the write it removes left the
+/// receiver's causal context covering that write, and anti-entropy by causal context then judged it up to date.
+/// Anti-entropy compares applied operations instead.
+#[test]
+fn anti_entropy_resends_a_lost_write_whose_removal_arrived() {
+    let (mut a, mut b) = pair();
+    let (x, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let (y, d2) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
+    let (key, d3) = a.insert_edge(3, x, y, "in", vec![("level".into(), Value::I32(0))]).unwrap();
+    for d in [&d1, &d2, &d3] {
+        ship(d, &mut b);
+    }
+    let _lost = a.set_attr(4, &key, attrs::LEVEL, 21).unwrap();
+    let removal = a.remove_attr(5, &key, "level").unwrap();
+    ship(&removal, &mut b);
+    assert_ne!(a.digest(), b.digest(), "b still shows the value the lost write overwrote");
+    match a.missing_for(b.applied()) {
+        dsr::Missing::Deltas(deltas) => {
+            assert_eq!(deltas.len(), 1, "exactly the lost write");
+            ship(&deltas[0], &mut b);
+        }
+        other => panic!("expected the lost delta, got {other:?}"),
+    }
+    assert_eq!(a.digest(), b.digest());
 }
