@@ -1,0 +1,54 @@
+//! `cortex check` from the command line: a small convergence check passes with a complete JSON report, bad
+//! arguments are refused with a message, and a build without the `mutants` feature refuses to plant bugs.
+
+use std::process::Command;
+
+fn cortex(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_cortex")).args(args).output().expect("cortex runs")
+}
+
+#[test]
+fn small_convergence_check_passes_with_a_json_report() {
+    let out = cortex(&["check", "convergence", "--replicas", "2", "--ops", "2", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON report");
+    assert_eq!(report["model"], "convergence");
+    assert_eq!(report["complete"], true);
+    assert!(report["unique_states"].as_u64().unwrap() > 100);
+    let properties = report["properties"].as_array().unwrap();
+    assert!(properties.iter().all(|p| p["holds"] == true));
+}
+
+#[test]
+fn scheduler_check_passes() {
+    let out = cortex(&["check", "scheduler", "--horizon-ns", "30"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("shared dependency runs once per period"));
+}
+
+#[test]
+fn bad_arguments_are_refused_with_a_message() {
+    let out = cortex(&["check", "convergence", "--network", "carrier-pigeon"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown network"));
+    let out = cortex(&["check", "convergence", "--replicas", "9"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--replicas must be between 2 and 5"));
+}
+
+#[cfg(not(feature = "mutants"))]
+#[test]
+fn a_normal_build_cannot_plant_mutants() {
+    let out = cortex(&["check", "mutants"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--features mutants"));
+}
+
+#[cfg(feature = "mutants")]
+#[test]
+fn every_mutant_is_killed_from_the_command_line() {
+    let out = cortex(&["check", "mutants", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let results: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON results");
+    assert!(results.as_array().unwrap().iter().all(|r| r["killed"] == true));
+}
