@@ -1,0 +1,271 @@
+//! # The transport boundary of DSR_d agents
+//!
+//! An agent hands opaque byte samples to a [`Transport`] on one of a few [`Channel`]s and takes the samples
+//! other endpoints published, each tagged with the [`EndpointId`] it came from. The agent never sees sockets,
+//! discovery or QoS; the transport never sees graphs. Three implementations:
+//!
+//! - [`rtps::RtpsTransport`]: RTPS through the `rustdds` DDS implementation (the default for real agents): reliable,
+//!   keep-all, explicit resource limits on every reader and writer, a bounded inbox, pacing of large samples.
+//! - [`inproc::Bus`] / [`inproc::InProcTransport`]: an in-process bus for tests and deterministic simulation.
+//! - [`fault::FaultInjector`]: seeded loss, duplication, reordering, delay and partitions, wrapped around either.
+//!
+//! **Every queue is bounded**: a full inbox drops (in process) or pushes back on the network reader (RTPS), and
+//! the drop is counted in [`TransportStats`]. **A transport never delivers an endpoint's own samples back to it.**
+//! Time comes from an injected [`Clock`], so the in-process bus and the fault injector are deterministic given a
+//! seed and a [`ManualClock`].
+
+use std::fmt;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use bytes::Bytes;
+
+pub mod fault;
+pub mod inproc;
+pub mod rng;
+pub mod rtps;
+
+/// A logical stream of samples. Each channel is its own topic on RTPS, so a large snapshot on [`Channel::Sync`]
+/// never delays a small update on [`Channel::Updates`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Channel {
+    /// Deltas of local operations, as they happen.
+    Updates,
+    /// Anti-entropy and late join: version-vector announces, graph requests, missing deltas, snapshots.
+    Sync,
+    /// Remote component calls: requests and replies.
+    Calls,
+}
+
+impl Channel {
+    /// All channels, in index order.
+    pub const ALL: [Channel; 3] = [Channel::Updates, Channel::Sync, Channel::Calls];
+
+    /// A small index (0, 1, 2) for arrays of per-channel things.
+    pub fn index(self) -> usize {
+        match self {
+            Channel::Updates => 0,
+            Channel::Sync => 1,
+            Channel::Calls => 2,
+        }
+    }
+
+    /// The lower-case name used in topic names and logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::Updates => "updates",
+            Channel::Sync => "sync",
+            Channel::Calls => "calls",
+        }
+    }
+}
+
+/// Who published a sample: an in-process endpoint number, or the 12-byte RTPS GUID prefix of a participant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct EndpointId(pub u128);
+
+impl fmt::Display for EndpointId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0 <= u64::MAX as u128 { write!(f, "ep{}", self.0) } else { write!(f, "rtps:{:024x}", self.0) }
+    }
+}
+
+/// One received sample.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Sample {
+    /// The channel it was published on.
+    pub channel: Channel,
+    /// Who published it (as the transport saw it; the agent envelope names the agent).
+    pub origin: EndpointId,
+    /// The bytes, exactly as published.
+    pub bytes: Bytes,
+}
+
+/// Errors of a transport. Messages say what failed and where.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    /// The DDS engine refused to create something.
+    #[error("rtps setup: {what}: {detail}")]
+    Setup {
+        /// What was being created.
+        what: String,
+        /// The engine's message.
+        detail: String,
+    },
+    /// The DDS engine refused a write.
+    #[error("rtps write on channel {channel}: {detail}")]
+    Write {
+        /// The channel name.
+        channel: &'static str,
+        /// The engine's message.
+        detail: String,
+    },
+    /// A sample is larger than the configured maximum.
+    #[error("sample of {size} bytes on channel {channel} exceeds the limit of {limit} bytes")]
+    TooLarge {
+        /// The channel name.
+        channel: &'static str,
+        /// Sample size.
+        size: usize,
+        /// The limit.
+        limit: usize,
+    },
+    /// The transport was closed.
+    #[error("transport closed")]
+    Closed,
+}
+
+/// Moves samples between agents. Implementations are thread-safe: an agent publishes from its callers' threads and
+/// receives on its own thread.
+pub trait Transport: Send + Sync {
+    /// This endpoint's id, as others see it in [`Sample::origin`].
+    fn local_id(&self) -> EndpointId;
+
+    /// Publishes `bytes` to every other endpoint on `channel`. May block briefly for back-pressure (pacing of
+    /// large samples); never waits on a remote reply.
+    ///
+    /// # Errors
+    /// [`TransportError`] when the sample cannot be handed to the network.
+    fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError>;
+
+    /// The next received sample, if one is waiting.
+    fn try_recv(&self) -> Option<Sample>;
+
+    /// The next received sample, waiting up to `timeout` for one.
+    fn recv_timeout(&self, timeout: Duration) -> Option<Sample>;
+
+    /// Counters of what went through this endpoint.
+    fn stats(&self) -> TransportStats;
+}
+
+impl<T: Transport + ?Sized> Transport for Arc<T> {
+    fn local_id(&self) -> EndpointId {
+        (**self).local_id()
+    }
+    fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
+        (**self).publish(channel, bytes)
+    }
+    fn try_recv(&self) -> Option<Sample> {
+        (**self).try_recv()
+    }
+    fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
+        (**self).recv_timeout(timeout)
+    }
+    fn stats(&self) -> TransportStats {
+        (**self).stats()
+    }
+}
+
+/// A snapshot of a transport's counters.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TransportStats {
+    /// Samples published.
+    pub samples_sent: u64,
+    /// Bytes of samples published (the agent's envelopes).
+    pub payload_bytes_sent: u64,
+    /// Bytes that publishing put on the wire as the transport accounts for them: payload plus per-sample
+    /// encapsulation and protocol headers (RTPS: an estimate from the submessage layout, see [`rtps`]).
+    pub wire_bytes_sent: u64,
+    /// Samples received and handed to the agent.
+    pub samples_received: u64,
+    /// Bytes of samples received.
+    pub payload_bytes_received: u64,
+    /// Samples dropped because a bounded queue was full.
+    pub dropped_full: u64,
+    /// Samples dropped on purpose (fault injection: loss and partitions).
+    pub dropped_injected: u64,
+    /// Extra copies delivered on purpose (fault injection: duplication).
+    pub duplicated_injected: u64,
+}
+
+/// Atomic counters behind [`TransportStats`].
+#[derive(Debug, Default)]
+pub struct Counters {
+    samples_sent: AtomicU64,
+    payload_bytes_sent: AtomicU64,
+    wire_bytes_sent: AtomicU64,
+    samples_received: AtomicU64,
+    payload_bytes_received: AtomicU64,
+    dropped_full: AtomicU64,
+}
+
+impl Counters {
+    /// Counts one published sample of `payload` bytes that cost `wire` bytes.
+    pub fn sent(&self, payload: usize, wire: usize) {
+        self.samples_sent.fetch_add(1, Ordering::Relaxed);
+        self.payload_bytes_sent.fetch_add(payload as u64, Ordering::Relaxed);
+        self.wire_bytes_sent.fetch_add(wire as u64, Ordering::Relaxed);
+    }
+
+    /// Counts one received sample.
+    pub fn received(&self, payload: usize) {
+        self.samples_received.fetch_add(1, Ordering::Relaxed);
+        self.payload_bytes_received.fetch_add(payload as u64, Ordering::Relaxed);
+    }
+
+    /// Counts one sample dropped at a full queue.
+    pub fn dropped_full(&self) {
+        self.dropped_full.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// The current values.
+    pub fn snapshot(&self) -> TransportStats {
+        TransportStats {
+            samples_sent: self.samples_sent.load(Ordering::Relaxed),
+            payload_bytes_sent: self.payload_bytes_sent.load(Ordering::Relaxed),
+            wire_bytes_sent: self.wire_bytes_sent.load(Ordering::Relaxed),
+            samples_received: self.samples_received.load(Ordering::Relaxed),
+            payload_bytes_received: self.payload_bytes_received.load(Ordering::Relaxed),
+            dropped_full: self.dropped_full.load(Ordering::Relaxed),
+            dropped_injected: 0,
+            duplicated_injected: 0,
+        }
+    }
+}
+
+/// A source of time in nanoseconds. Agents stamp operations with it and time their periodic work by it; the
+/// fault injector times delays by it.
+pub trait Clock: Send + Sync + fmt::Debug {
+    /// Nanoseconds on this clock.
+    fn now_ns(&self) -> u64;
+}
+
+/// Wall-clock time since the Unix epoch: what real agents use, so stamps of different processes are comparable.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SystemClock;
+
+impl Clock for SystemClock {
+    fn now_ns(&self) -> u64 {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+    }
+}
+
+/// A clock that moves only when told: the basis of deterministic simulations. Clones share the time.
+#[derive(Clone, Debug, Default)]
+pub struct ManualClock(Arc<AtomicU64>);
+
+impl ManualClock {
+    /// A clock reading `start_ns`.
+    pub fn new(start_ns: u64) -> Self {
+        ManualClock(Arc::new(AtomicU64::new(start_ns)))
+    }
+
+    /// Moves the clock forward by `ns`.
+    pub fn advance(&self, ns: u64) {
+        self.0.fetch_add(ns, Ordering::SeqCst);
+    }
+
+    /// Sets the clock (never backwards: a smaller value is ignored).
+    pub fn set(&self, ns: u64) {
+        self.0.fetch_max(ns, Ordering::SeqCst);
+    }
+}
+
+impl Clock for ManualClock {
+    fn now_ns(&self) -> u64 {
+        self.0.load(Ordering::SeqCst)
+    }
+}
