@@ -64,9 +64,10 @@ pub struct ConvergenceConfig {
     /// A planted bug (with the `mutants` feature).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mutant: Option<String>,
+    /// The planted bug itself (set with [`ConvergenceConfig::with_mutant`]).
     #[serde(skip)]
     #[cfg(feature = "mutants")]
-    pub(crate) planted: Option<dsr::DsrMutant>,
+    pub planted: Option<dsr::DsrMutant>,
 }
 
 impl Default for ConvergenceConfig {
