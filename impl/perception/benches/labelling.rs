@@ -1,6 +1,9 @@
 //! Colour labelling throughput on the real EuRoC 752x480 frames (target: at least 300 frames/s on one core),
 //! for `mono8` and for an `rgb8` image made from the same frame.
 
+// `criterion_group!` generates an undocumented public function.
+#![allow(missing_docs)]
+
 use bytes::Bytes;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use perception::fixtures;

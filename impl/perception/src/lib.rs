@@ -18,6 +18,7 @@
 //!
 //! Units follow the graph: mm and rad.
 
+pub mod ekf;
 pub mod fixtures;
 pub mod graph;
 pub mod labelling;
