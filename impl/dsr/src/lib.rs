@@ -113,3 +113,8 @@ pub use replica::{
     VisibleNode,
 };
 pub use value::{AttrType, Value, ValueType};
+
+/// The README's Rust examples, compiled and run as doctests so the README stays true.
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+pub struct ReadmeDoctests;
