@@ -27,6 +27,23 @@ use crate::value::{AttrType, ValueType};
 /// assert_eq!(attrs::LEVEL.name(), "level");
 /// assert_eq!(attrs::LEVEL.value_type(), dsr::ValueType::I32);
 /// ```
+///
+/// A value of the wrong type does not compile:
+/// ```compile_fail
+/// use dsr::{NewNode, Replica, ReplicaId, attrs};
+/// let mut replica = Replica::new(ReplicaId(1));
+/// let (id, _) = replica.insert_node(0, NewNode::new("world", "world")).unwrap();
+/// replica.set_attr(1, id, attrs::RT_TRANSLATION, "not a vector").unwrap();
+/// ```
+/// while the right one does:
+/// ```
+/// use std::sync::Arc;
+/// use dsr::{NewNode, Replica, ReplicaId, attrs};
+/// let mut replica = Replica::new(ReplicaId(1));
+/// let (id, _) = replica.insert_node(0, NewNode::new("world", "world")).unwrap();
+/// let translation: Arc<[f32]> = Arc::from([0.0f32, 0.0, 100.0]);
+/// replica.set_attr(1, id, attrs::RT_TRANSLATION, translation).unwrap();
+/// ```
 pub struct AttrKey<T> {
     name: &'static str,
     _type: PhantomData<fn() -> T>,
