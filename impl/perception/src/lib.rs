@@ -18,8 +18,11 @@
 //!
 //! Units follow the graph: mm and rad.
 
+pub mod clusters;
+pub mod detections;
 pub mod ekf;
 pub mod fixtures;
 pub mod graph;
 pub mod labelling;
+pub mod obstacles;
 pub mod sensors;

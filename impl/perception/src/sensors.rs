@@ -308,6 +308,7 @@ pub struct SensorReader<S: Sensor> {
     node_name: String,
     node: Option<NodeId>,
     latest: Option<Arc<S::Reading>>,
+    latest_stamp_ns: Option<u64>,
     version: Vec<Option<Dot>>,
     fresh: bool,
     readings: u64,
@@ -345,6 +346,7 @@ impl<S: Sensor> SensorReader<S> {
             node_name: node_name.into(),
             node: None,
             latest: None,
+            latest_stamp_ns: None,
             version: Vec::new(),
             fresh: false,
             readings: 0,
@@ -356,6 +358,11 @@ impl<S: Sensor> SensorReader<S> {
     /// The latest good reading.
     pub fn latest(&self) -> Option<&Arc<S::Reading>> {
         self.latest.as_ref()
+    }
+
+    /// The `stamp_ns` attribute of the sensor node when the latest reading was taken, if it had one.
+    pub fn latest_stamp_ns(&self) -> Option<u64> {
+        self.latest_stamp_ns
     }
 
     /// Whether the last step found a new good reading.
@@ -406,6 +413,7 @@ impl<S: Sensor> SensorReader<S> {
         match S::read(&*graph, node) {
             Ok(Some(reading)) => {
                 self.latest = Some(Arc::new(reading));
+                self.latest_stamp_ns = graph.get(node, attrs::STAMP_NS);
                 self.fresh = true;
                 self.readings += 1;
             }
