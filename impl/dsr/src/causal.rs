@@ -188,8 +188,22 @@ impl CausalContext {
         self.cloud.len()
     }
 
-    /// Rebuilds a context from its two parts, normalising them (used by decoding).
-    pub(crate) fn from_parts(vv: Vec<(ReplicaId, u64)>, cloud: Vec<Dot>) -> Self {
+    /// Rebuilds a context from its two parts (as given by [`CausalContext::version_vector`] and
+    /// [`CausalContext::cloud`]), normalising them: any order, duplicates, zero counters and cloud dots the
+    /// version vector covers are accepted and cleaned up. Used by delta decoding and by agents that carry contexts
+    /// in their own messages.
+    ///
+    /// # Examples
+    /// ```
+    /// use dsr::{CausalContext, Dot, ReplicaId};
+    /// let (a, b) = (ReplicaId(1), ReplicaId(2));
+    /// let ctx = CausalContext::from_parts(vec![(b, 3), (a, 0), (b, 1)], vec![Dot::new(b, 2), Dot::new(a, 5)]);
+    /// assert_eq!(ctx.version_vector(), &[(b, 3)]);
+    /// assert!(ctx.contains(Dot::new(a, 5)) && !ctx.contains(Dot::new(a, 4)));
+    /// let again = CausalContext::from_parts(ctx.version_vector().to_vec(), ctx.cloud().iter().copied().collect());
+    /// assert_eq!(again, ctx);
+    /// ```
+    pub fn from_parts(vv: Vec<(ReplicaId, u64)>, cloud: Vec<Dot>) -> Self {
         let mut ctx = CausalContext::default();
         let mut vv = vv;
         vv.sort_unstable();

@@ -1,0 +1,844 @@
+//! The [`Agent`]: a `dsr::Replica` behind a thread-safe API, joined to other agents through a [`Transport`].
+//!
+//! All protocol decisions happen under one short lock on the agent's state and produce a list of messages; the
+//! messages are published after the lock is released. The same code runs threaded ([`Agent::start`]: a
+//! receiving thread waits on the transport) or driven by hand ([`Agent::pump`]: a simulation calls it with a
+//! [`transport::ManualClock`] and a seeded fault injector, so runs are reproducible).
+
+use std::collections::{BTreeMap, VecDeque};
+use std::hash::{BuildHasher, Hasher};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use bytes::Bytes;
+use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
+use dsr::json::CortexGraph;
+use dsr::{
+    AttrKey, AttrType, Change, Delta, Digest, EdgeKey, Element, LogLimits, Missing, NewNode, NodeId, OpError, Replica,
+    ReplicaId, Value, VisibleGraph,
+};
+use transport::{Channel, Clock, Sample, Transport, TransportError, TransportStats};
+
+use crate::AgentId;
+use crate::envelope::Message;
+
+/// Settings of an agent.
+#[derive(Clone, Debug)]
+pub struct AgentConfig {
+    /// This agent's id (below [`AgentId::LIMIT`]).
+    pub id: AgentId,
+    /// How long to wait for a graph from peers before starting alone.
+    pub join_wait: Duration,
+    /// How often to repeat the graph request while joining.
+    pub join_retry: Duration,
+    /// How often to announce the causal context (anti-entropy).
+    pub announce_period: Duration,
+    /// History kept for anti-entropy.
+    pub log_limits: LogLimits,
+    /// Deltas kept while joining, to apply once the graph arrives (older ones are dropped past it; anti-entropy
+    /// brings them back).
+    pub max_buffered_deltas: usize,
+    /// Most bytes of deltas in one anti-entropy answer message.
+    pub max_batch_bytes: usize,
+    /// The graph to start from if no peer answers (the first agent of a system).
+    pub seed: Option<CortexGraph>,
+    /// This life's nonce; `None` draws a random one (set it only in deterministic simulations).
+    pub nonce: Option<u64>,
+}
+
+impl AgentConfig {
+    /// Defaults for agent `id`: join wait 2 s (request every 200 ms), announce every 500 ms.
+    pub fn new(id: AgentId) -> Self {
+        AgentConfig {
+            id,
+            join_wait: Duration::from_secs(2),
+            join_retry: Duration::from_millis(200),
+            announce_period: Duration::from_millis(500),
+            log_limits: LogLimits::default(),
+            max_buffered_deltas: 65_536,
+            max_batch_bytes: 256 << 10,
+            seed: None,
+            nonce: None,
+        }
+    }
+}
+
+/// Errors of the agent API.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    /// The agent id is out of range.
+    #[error("agent id {0} is out of range (0..{limit})", limit = AgentId::LIMIT)]
+    InvalidId(u32),
+    /// The agent has not received or started its graph yet.
+    #[error("{0} has not joined a graph yet")]
+    NotJoined(AgentId),
+    /// Another live agent uses this id; local writes are refused.
+    #[error("{agent}: id collision ({detail}); local writes are refused")]
+    IdCollision {
+        /// This agent.
+        agent: AgentId,
+        /// What was seen.
+        detail: String,
+    },
+    /// The replica refused the operation.
+    #[error("{agent}: {source}")]
+    Op {
+        /// This agent.
+        agent: AgentId,
+        /// Why.
+        source: OpError,
+    },
+    /// The transport failed.
+    #[error("{agent}: {source}")]
+    Transport {
+        /// This agent.
+        agent: AgentId,
+        /// Why.
+        source: TransportError,
+    },
+    /// The seed graph could not be imported.
+    #[error("{agent}: seed graph: {source}")]
+    Seed {
+        /// This agent.
+        agent: AgentId,
+        /// Why.
+        source: dsr::json::JsonError,
+    },
+    /// A thread could not be started.
+    #[error("{agent}: cannot start the receiving thread: {detail}")]
+    Thread {
+        /// This agent.
+        agent: AgentId,
+        /// Why.
+        detail: String,
+    },
+}
+
+/// One visible change, with the agent whose operation made it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ChangeSignal {
+    /// What changed.
+    pub change: Change,
+    /// The originating agent (`None` when a snapshot made it and the origin is unknown).
+    pub origin: Option<AgentId>,
+    /// Whether this agent's own operation made it.
+    pub local: bool,
+}
+
+/// A value copy of a visible node.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeCopy {
+    /// Its id.
+    pub id: NodeId,
+    /// Its type.
+    pub node_type: String,
+    /// Its visible name.
+    pub name: String,
+    /// Its attributes' winning values.
+    pub attrs: BTreeMap<String, Value>,
+}
+
+/// What an agent can tell about itself.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AgentStatus {
+    /// The agent id.
+    pub id: AgentId,
+    /// The replica id of this life, once joined.
+    pub replica: Option<ReplicaId>,
+    /// Whether the graph has been received or started.
+    pub ready: bool,
+    /// An id collision, if one was seen.
+    pub collision: Option<String>,
+    /// Samples rejected (foreign, malformed, or refused by the replica).
+    pub rejected: u64,
+    /// Change signals dropped because a subscriber's channel was full.
+    pub signals_dropped: u64,
+    /// Publishes that failed (the local state is kept; anti-entropy repairs).
+    pub publish_failures: u64,
+    /// Peers heard from, by agent id.
+    pub peers: Vec<AgentId>,
+    /// Visible nodes.
+    pub nodes: usize,
+    /// Visible edges.
+    pub edges: usize,
+    /// The transport's counters.
+    pub transport: TransportStats,
+}
+
+/// Mutable protocol state, behind one lock.
+struct State {
+    replica: Option<Replica>,
+    joining_since_ns: u64,
+    last_request_ns: Option<u64>,
+    /// Highest incarnation of this agent id seen anywhere.
+    incarnation_floor: u32,
+    buffered: VecDeque<Arc<Delta>>,
+    collision: Option<String>,
+    next_announce_ns: u64,
+    pending_ask: Option<(AgentId, u64)>,
+    peers: BTreeMap<AgentId, u64>,
+    seed: Option<CortexGraph>,
+}
+
+struct Inner<T> {
+    config: AgentConfig,
+    nonce: u64,
+    transport: T,
+    clock: Arc<dyn Clock>,
+    state: Mutex<State>,
+    subscribers: Mutex<Vec<Sender<ChangeSignal>>>,
+    stop: AtomicBool,
+    rejected: AtomicU64,
+    signals_dropped: AtomicU64,
+    publish_failures: AtomicU64,
+}
+
+/// A DSR_d agent. Thread-safe: share it by reference or in an `Arc`.
+pub struct Agent<T: Transport + 'static> {
+    inner: Arc<Inner<T>>,
+    thread: Mutex<Option<JoinHandle<()>>>,
+}
+
+impl<T: Transport + 'static> std::fmt::Debug for Agent<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Agent").field("id", &self.inner.config.id).field("nonce", &self.inner.nonce).finish()
+    }
+}
+
+fn random_nonce() -> u64 {
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u32(std::process::id());
+    hasher
+        .write_u128(std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default().as_nanos());
+    hasher.finish()
+}
+
+impl<T: Transport + 'static> Agent<T> {
+    /// An agent driven by hand ([`Agent::pump`]): it starts joining at the clock's current time.
+    ///
+    /// # Errors
+    /// [`AgentError::InvalidId`] for an id out of range.
+    pub fn new(mut config: AgentConfig, transport: T, clock: Arc<dyn Clock>) -> Result<Self, AgentError> {
+        if config.id.0 >= AgentId::LIMIT {
+            return Err(AgentError::InvalidId(config.id.0));
+        }
+        let now = clock.now_ns();
+        let nonce = config.nonce.unwrap_or_else(random_nonce);
+        let seed = config.seed.take();
+        let state = State {
+            replica: None,
+            joining_since_ns: now,
+            last_request_ns: None,
+            incarnation_floor: 0,
+            buffered: VecDeque::new(),
+            collision: None,
+            next_announce_ns: now,
+            pending_ask: None,
+            peers: BTreeMap::new(),
+            seed,
+        };
+        let inner = Inner {
+            config,
+            nonce,
+            transport,
+            clock,
+            state: Mutex::new(state),
+            subscribers: Mutex::new(Vec::new()),
+            stop: AtomicBool::new(false),
+            rejected: AtomicU64::new(0),
+            signals_dropped: AtomicU64::new(0),
+            publish_failures: AtomicU64::new(0),
+        };
+        Ok(Agent { inner: Arc::new(inner), thread: Mutex::new(None) })
+    }
+
+    /// An agent with its own receiving thread, which handles samples as they arrive and does the periodic work.
+    ///
+    /// # Errors
+    /// As [`Agent::new`], and [`AgentError::Thread`].
+    pub fn start(config: AgentConfig, transport: T, clock: Arc<dyn Clock>) -> Result<Self, AgentError> {
+        let agent = Agent::new(config, transport, clock)?;
+        let inner = Arc::clone(&agent.inner);
+        let tick = (agent.inner.config.join_retry.min(agent.inner.config.announce_period) / 4)
+            .clamp(Duration::from_millis(1), Duration::from_millis(50));
+        let handle = std::thread::Builder::new()
+            .name(format!("agent-{}", agent.inner.config.id.0))
+            .spawn(move || {
+                while !inner.stop.load(Ordering::Relaxed) {
+                    if let Some(sample) = inner.transport.recv_timeout(tick) {
+                        inner.handle(sample);
+                        for _ in 0..1024 {
+                            let Some(sample) = inner.transport.try_recv() else { break };
+                            inner.handle(sample);
+                        }
+                    }
+                    inner.tick();
+                }
+            })
+            .map_err(|e| AgentError::Thread { agent: agent.inner.config.id, detail: e.to_string() })?;
+        *agent.thread.lock().unwrap_or_else(|p| p.into_inner()) = Some(handle);
+        Ok(agent)
+    }
+
+    /// Handles every sample waiting on the transport, then does the periodic work due. Returns the samples
+    /// handled. (For agents made with [`Agent::new`].)
+    pub fn pump(&self) -> usize {
+        let mut handled = 0;
+        while let Some(sample) = self.inner.transport.try_recv() {
+            self.inner.handle(sample);
+            handled += 1;
+        }
+        self.inner.tick();
+        handled
+    }
+
+    /// Waits (up to `timeout`) until the agent has its graph; returns whether it has.
+    pub fn wait_ready(&self, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if self.is_ready() {
+                return true;
+            }
+            if Instant::now() >= deadline {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// Stops the receiving thread (if any) and waits for it.
+    pub fn shutdown(&self) {
+        self.inner.stop.store(true, Ordering::SeqCst);
+        if let Some(handle) = self.thread.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            let _ = handle.join();
+        }
+    }
+
+    /// This agent's id.
+    pub fn id(&self) -> AgentId {
+        self.inner.config.id
+    }
+
+    /// This life's nonce.
+    pub fn nonce(&self) -> u64 {
+        self.inner.nonce
+    }
+
+    /// The transport.
+    pub fn transport(&self) -> &T {
+        &self.inner.transport
+    }
+
+    /// Whether the graph has been received or started.
+    pub fn is_ready(&self) -> bool {
+        self.inner.lock().replica.is_some()
+    }
+
+    /// A new subscription to change signals, holding up to `capacity` undelivered signals.
+    pub fn subscribe(&self, capacity: usize) -> Receiver<ChangeSignal> {
+        let (sender, receiver) = bounded(capacity.max(1));
+        self.inner.subscribers.lock().unwrap_or_else(|p| p.into_inner()).push(sender);
+        receiver
+    }
+
+    /// Status and counters.
+    pub fn status(&self) -> AgentStatus {
+        let state = self.inner.lock();
+        AgentStatus {
+            id: self.inner.config.id,
+            replica: state.replica.as_ref().map(Replica::id),
+            ready: state.replica.is_some(),
+            collision: state.collision.clone(),
+            rejected: self.inner.rejected.load(Ordering::Relaxed),
+            signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
+            publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
+            peers: state.peers.keys().copied().collect(),
+            nodes: state.replica.as_ref().map_or(0, Replica::node_count),
+            edges: state.replica.as_ref().map_or(0, Replica::edge_count),
+            transport: self.inner.transport.stats(),
+        }
+    }
+
+    // -------------------------------------------------------------------------------------------------------
+    // Reads: a short lock, never the network.
+
+    /// Runs `f` on the replica (`None` before the agent has its graph). Keep `f` short: it holds the lock.
+    pub fn read<R>(&self, f: impl FnOnce(&Replica) -> R) -> Option<R> {
+        self.inner.lock().replica.as_ref().map(f)
+    }
+
+    /// A value copy of node `id`, if visible.
+    pub fn node(&self, id: NodeId) -> Option<NodeCopy> {
+        self.read(|r| r.node(id).map(|n| node_copy(&n))).flatten()
+    }
+
+    /// A value copy of the node named `name`, if visible.
+    pub fn node_by_name(&self, name: &str) -> Option<NodeCopy> {
+        self.read(|r| r.node_by_name(name).map(|n| node_copy(&n))).flatten()
+    }
+
+    /// The typed value of an attribute of a visible node or edge.
+    pub fn attr<V: AttrType>(&self, element: impl Into<Element>, key: AttrKey<V>) -> Option<V> {
+        let element = element.into();
+        self.read(|r| match &element {
+            Element::Node(id) => r.node(*id).and_then(|n| n.get(key)),
+            Element::Edge(edge) => r.edge(edge).and_then(|e| e.get(key)),
+        })
+        .flatten()
+    }
+
+    /// The digest of the visible graph.
+    pub fn digest(&self) -> Option<Digest> {
+        self.read(Replica::digest)
+    }
+
+    /// The visible graph in canonical form.
+    pub fn visible_graph(&self) -> Option<VisibleGraph> {
+        self.read(Replica::visible_graph)
+    }
+
+    // -------------------------------------------------------------------------------------------------------
+    // Writes: the replica operation under the lock, the publish after it.
+
+    fn write<R>(
+        &self,
+        op: impl FnOnce(&mut Replica, u64) -> Result<(R, Arc<Delta>), OpError>,
+    ) -> Result<R, AgentError> {
+        let agent = self.inner.config.id;
+        let now = self.inner.clock.now_ns();
+        let (result, delta, changes) = {
+            let mut state = self.inner.lock();
+            if let Some(detail) = &state.collision {
+                return Err(AgentError::IdCollision { agent, detail: detail.clone() });
+            }
+            let replica = state.replica.as_mut().ok_or(AgentError::NotJoined(agent))?;
+            let (result, delta) = op(replica, now).map_err(|source| AgentError::Op { agent, source })?;
+            (result, delta, replica.drain_changes())
+        };
+        let message = Message::Delta { from: agent, delta: Bytes::from(delta.encode()) };
+        self.inner.send(vec![(Channel::Updates, message)]);
+        self.inner.signal(changes);
+        Ok(result)
+    }
+
+    /// Inserts a node; returns its id.
+    ///
+    /// # Errors
+    /// [`AgentError`]: not joined, id collision, or the replica refused it.
+    pub fn insert_node(&self, node: NewNode) -> Result<NodeId, AgentError> {
+        self.write(|r, now| r.insert_node(now, node))
+    }
+
+    /// Deletes a node (and hides its edges).
+    ///
+    /// # Errors
+    /// As [`Agent::insert_node`].
+    pub fn delete_node(&self, id: NodeId) -> Result<(), AgentError> {
+        self.write(|r, now| r.delete_node(now, id).map(|d| ((), d)))
+    }
+
+    /// Inserts an edge with attributes; returns its key.
+    ///
+    /// # Errors
+    /// As [`Agent::insert_node`].
+    pub fn insert_edge(
+        &self,
+        from: NodeId,
+        to: NodeId,
+        edge_type: &str,
+        attrs: Vec<(String, Value)>,
+    ) -> Result<EdgeKey, AgentError> {
+        self.write(|r, now| r.insert_edge(now, from, to, edge_type, attrs))
+    }
+
+    /// Deletes an edge.
+    ///
+    /// # Errors
+    /// As [`Agent::insert_node`].
+    pub fn delete_edge(&self, key: &EdgeKey) -> Result<(), AgentError> {
+        self.write(|r, now| r.delete_edge(now, key).map(|d| ((), d)))
+    }
+
+    /// Writes one attribute with a typed key.
+    ///
+    /// # Errors
+    /// As [`Agent::insert_node`].
+    pub fn set_attr<V: AttrType>(
+        &self,
+        element: impl Into<Element>,
+        key: AttrKey<V>,
+        value: impl Into<V>,
+    ) -> Result<(), AgentError> {
+        self.write(|r, now| r.set_attr(now, element, key, value).map(|d| ((), d)))
+    }
+
+    /// Writes several attributes as one delta.
+    ///
+    /// # Errors
+    /// As [`Agent::insert_node`].
+    pub fn set_attrs<'n>(
+        &self,
+        element: impl Into<Element>,
+        attrs: impl IntoIterator<Item = (&'n str, Value)>,
+    ) -> Result<(), AgentError> {
+        self.write(|r, now| r.set_attrs(now, element, attrs).map(|d| ((), d)))
+    }
+
+    /// Removes an attribute.
+    ///
+    /// # Errors
+    /// As [`Agent::insert_node`].
+    pub fn remove_attr(&self, element: impl Into<Element>, name: &str) -> Result<(), AgentError> {
+        self.write(|r, now| r.remove_attr(now, element, name).map(|d| ((), d)))
+    }
+}
+
+impl<T: Transport + 'static> Drop for Agent<T> {
+    fn drop(&mut self) {
+        self.shutdown();
+    }
+}
+
+fn node_copy(node: &dsr::NodeRef<'_>) -> NodeCopy {
+    NodeCopy {
+        id: node.id(),
+        node_type: node.node_type().to_string(),
+        name: node.name().into_owned(),
+        attrs: node.attrs().map(|(k, v)| (k.to_string(), v.clone())).collect(),
+    }
+}
+
+impl<T: Transport> Inner<T> {
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn me(&self) -> AgentId {
+        self.config.id
+    }
+
+    /// Publishes messages (never called with the state lock held).
+    fn send(&self, messages: Vec<(Channel, Message)>) {
+        for (channel, message) in messages {
+            if let Err(error) = self.transport.publish(channel, message.encode()) {
+                self.publish_failures.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!("{}: publishing a {} message failed: {error}", self.me(), message.kind());
+            }
+        }
+    }
+
+    fn signal(&self, changes: Vec<dsr::ChangeEvent>) {
+        if changes.is_empty() {
+            return;
+        }
+        let mine = self.lock().replica.as_ref().map(Replica::id);
+        let mut subscribers = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        for event in changes {
+            let signal = ChangeSignal {
+                origin: event.origin.map(AgentId::of_replica),
+                local: event.origin.is_some() && event.origin == mine,
+                change: event.change,
+            };
+            subscribers.retain(|sender| match sender.try_send(signal.clone()) {
+                Ok(()) => true,
+                Err(TrySendError::Full(_)) => {
+                    self.signals_dropped.fetch_add(1, Ordering::Relaxed);
+                    true
+                }
+                Err(TrySendError::Disconnected(_)) => false,
+            });
+        }
+    }
+
+    fn reject(&self, sample: &Sample, what: &str, error: &dyn std::fmt::Display) {
+        self.rejected.fetch_add(1, Ordering::Relaxed);
+        tracing::error!(
+            "{}: dropped a {what} from {} on channel {}: {error}",
+            self.me(),
+            sample.origin,
+            sample.channel.name()
+        );
+    }
+
+    /// Decodes a `dsr` delta from a message payload, or rejects the sample.
+    fn delta(&self, sample: &Sample, kind: &str, bytes: &[u8]) -> Option<Arc<Delta>> {
+        match Delta::decode(bytes) {
+            Ok(delta) => Some(Arc::new(delta)),
+            Err(error) => {
+                self.reject(sample, kind, &error);
+                None
+            }
+        }
+    }
+
+    /// Joins remote deltas into the replica; returns the changes they made.
+    fn apply(&self, state: &mut State, sample: &Sample, kind: &str, deltas: Vec<Arc<Delta>>) -> Vec<dsr::ChangeEvent> {
+        let Some(replica) = state.replica.as_mut() else {
+            for delta in deltas {
+                if state.buffered.len() >= self.config.max_buffered_deltas {
+                    state.buffered.pop_front();
+                }
+                state.buffered.push_back(delta);
+            }
+            return Vec::new();
+        };
+        for delta in deltas {
+            if let Err(error) = replica.apply_shared(delta) {
+                self.reject(sample, kind, &error);
+            }
+        }
+        replica.drain_changes()
+    }
+
+    fn note_incarnations(&self, state: &mut State, context: &dsr::CausalContext) {
+        for replica in context.replicas() {
+            if AgentId::of_replica(replica) == self.me() {
+                state.incarnation_floor = state.incarnation_floor.max(AgentId::incarnation_of(replica));
+            }
+        }
+    }
+
+    /// Whether a message with this agent's id from life `nonce` (replica `replica`, if known) is a collision.
+    fn check_collision(&self, state: &mut State, nonce: u64, replica: Option<ReplicaId>, kind: &str) {
+        if nonce == self.nonce || state.collision.is_some() {
+            return;
+        }
+        let mine = state.replica.as_ref().map(|r| AgentId::incarnation_of(r.id()));
+        let older = match (replica, mine) {
+            (Some(theirs), Some(mine)) => AgentId::incarnation_of(theirs) < mine,
+            _ => false,
+        };
+        if !older {
+            let detail =
+                format!("a {kind} from another life of {} (nonce {nonce:#x}, mine {:#x})", self.me(), self.nonce);
+            tracing::error!("{}: id collision: {detail}", self.me());
+            state.collision = Some(detail);
+        }
+    }
+
+    fn handle(&self, sample: Sample) {
+        let message = match Message::decode(&sample.bytes) {
+            Ok(message) => message,
+            Err(error) => return self.reject(&sample, "sample", &error),
+        };
+        if message.to().is_some_and(|to| to != self.me()) {
+            return;
+        }
+        let me = self.me();
+        let now = self.clock.now_ns();
+        let mut out = Vec::new();
+        let changes = {
+            let mut state = self.lock();
+            state.peers.insert(message.from(), now);
+            match message {
+                Message::Delta { delta, .. } => match self.delta(&sample, "delta", &delta) {
+                    Some(delta) => self.apply(&mut state, &sample, "delta", vec![delta]),
+                    None => Vec::new(),
+                },
+                Message::Announce { from, nonce, replica, context } => {
+                    self.note_incarnations(&mut state, &context);
+                    if from == me {
+                        self.check_collision(&mut state, nonce, Some(replica), "announce");
+                    }
+                    let asked_recently = state.pending_ask.is_some_and(|(_, at)| {
+                        now.saturating_sub(at) < 2 * self.config.announce_period.as_nanos() as u64
+                    });
+                    if let Some(replica) = &state.replica
+                        && !asked_recently
+                        && !replica.context().includes(&context)
+                    {
+                        out.push((
+                            Channel::Sync,
+                            Message::MissingRequest { from: me, to: from, context: replica.context().clone() },
+                        ));
+                        state.pending_ask = Some((from, now));
+                    }
+                    Vec::new()
+                }
+                Message::MissingRequest { from, context, .. } => {
+                    if let Some(replica) = &state.replica {
+                        match replica.missing_for(&context) {
+                            Missing::UpToDate => {}
+                            Missing::Deltas(deltas) => out.extend(self.batches(from, &deltas)),
+                            Missing::Snapshot(snapshot) => out.push((
+                                Channel::Sync,
+                                Message::Snapshot { from: me, to: from, snapshot: Bytes::from(snapshot.encode()) },
+                            )),
+                        }
+                    }
+                    Vec::new()
+                }
+                Message::Deltas { from, deltas, .. } => {
+                    if state.pending_ask.is_some_and(|(peer, _)| peer == from) {
+                        state.pending_ask = None;
+                    }
+                    let decoded: Vec<Arc<Delta>> =
+                        deltas.iter().filter_map(|d| self.delta(&sample, "missing delta", d)).collect();
+                    self.apply(&mut state, &sample, "missing delta", decoded)
+                }
+                Message::Snapshot { from, snapshot, .. } => {
+                    if state.pending_ask.is_some_and(|(peer, _)| peer == from) {
+                        state.pending_ask = None;
+                    }
+                    match self.delta(&sample, "snapshot", &snapshot) {
+                        Some(snapshot) => {
+                            self.note_incarnations(&mut state, snapshot.context());
+                            self.apply(&mut state, &sample, "snapshot", vec![snapshot])
+                        }
+                        None => Vec::new(),
+                    }
+                }
+                Message::GraphRequest { from, nonce } => {
+                    if from == me {
+                        self.check_collision(&mut state, nonce, None, "graph request");
+                    } else if let Some(replica) = &state.replica {
+                        out.push((
+                            Channel::Sync,
+                            Message::GraphAnswer {
+                                from: me,
+                                to: from,
+                                nonce,
+                                snapshot: Bytes::from(replica.snapshot().encode()),
+                            },
+                        ));
+                    }
+                    Vec::new()
+                }
+                Message::GraphAnswer { nonce, snapshot, .. } => {
+                    if nonce != self.nonce || state.replica.is_some() {
+                        Vec::new()
+                    } else {
+                        match self.delta(&sample, "graph answer", &snapshot) {
+                            Some(snapshot) => self.join(&mut state, &sample, Some(snapshot)),
+                            None => Vec::new(),
+                        }
+                    }
+                }
+                Message::CallRequest { from, call, .. } => {
+                    out.push((
+                        Channel::Calls,
+                        Message::CallReply {
+                            from: me,
+                            to: from,
+                            call,
+                            result: Err(format!("{me} serves no remote calls")),
+                        },
+                    ));
+                    Vec::new()
+                }
+                Message::CallReply { .. } => Vec::new(),
+            }
+        };
+        self.send(out);
+        self.signal(changes);
+    }
+
+    /// Splits retained deltas into answer messages of bounded size.
+    fn batches(&self, to: AgentId, deltas: &[Arc<Delta>]) -> Vec<(Channel, Message)> {
+        let mut out = Vec::new();
+        let mut batch = Vec::new();
+        let mut bytes = 0;
+        for delta in deltas {
+            let encoded = Bytes::from(delta.encode());
+            if !batch.is_empty()
+                && (bytes + encoded.len() > self.config.max_batch_bytes || batch.len() >= crate::envelope::MAX_BATCH)
+            {
+                out.push((Channel::Sync, Message::Deltas { from: self.me(), to, deltas: std::mem::take(&mut batch) }));
+                bytes = 0;
+            }
+            bytes += encoded.len();
+            batch.push(encoded);
+        }
+        if !batch.is_empty() {
+            out.push((Channel::Sync, Message::Deltas { from: self.me(), to, deltas: batch }));
+        }
+        out
+    }
+
+    /// Creates this life's replica from a received snapshot (or alone, from the seed), then applies what was
+    /// buffered while joining.
+    fn join(&self, state: &mut State, sample: &Sample, snapshot: Option<Arc<Delta>>) -> Vec<dsr::ChangeEvent> {
+        if let Some(snapshot) = &snapshot {
+            self.note_incarnations(state, snapshot.context());
+        }
+        let incarnation = state.incarnation_floor + 1;
+        let mut replica = Replica::new(self.me().replica(incarnation));
+        replica.set_log_limits(self.config.log_limits);
+        replica.set_change_tracking(true);
+        if let Some(snapshot) = snapshot {
+            if let Err(error) = replica.apply_shared(snapshot) {
+                self.reject(sample, "graph answer", &error);
+                return Vec::new();
+            }
+            if state.seed.take().is_some() {
+                tracing::warn!("{}: joined a running graph; the seed graph is not used", self.me());
+            }
+        } else if let Some(seed) = state.seed.take() {
+            let now = self.clock.now_ns();
+            match seed.import_into(&mut replica, now) {
+                Ok(report) => tracing::info!("{}: started from the seed graph ({} nodes)", self.me(), report.nodes),
+                Err(error) => tracing::error!("{}: the seed graph was refused, starting empty: {error}", self.me()),
+            }
+        }
+        for delta in std::mem::take(&mut state.buffered) {
+            if let Err(error) = replica.apply_shared(delta) {
+                self.rejected.fetch_add(1, Ordering::Relaxed);
+                tracing::error!("{}: a buffered delta was refused: {error}", self.me());
+            }
+        }
+        tracing::info!("{}: ready as replica {}", self.me(), replica.id());
+        let changes = replica.drain_changes();
+        state.replica = Some(replica);
+        changes
+    }
+
+    /// Periodic work: graph requests while joining, starting alone after the wait, announces.
+    fn tick(&self) {
+        let now = self.clock.now_ns();
+        let me = self.me();
+        let mut out = Vec::new();
+        let changes = {
+            let mut state = self.lock();
+            if state.replica.is_none() {
+                if now.saturating_sub(state.joining_since_ns) >= self.config.join_wait.as_nanos() as u64 {
+                    tracing::info!("{me}: no peer answered within {:?}; starting alone", self.config.join_wait);
+                    let local =
+                        Sample { channel: Channel::Sync, origin: self.transport.local_id(), bytes: Bytes::new() };
+                    self.join(&mut state, &local, None)
+                } else {
+                    let due = state
+                        .last_request_ns
+                        .is_none_or(|at| now.saturating_sub(at) >= self.config.join_retry.as_nanos() as u64);
+                    if due {
+                        state.last_request_ns = Some(now);
+                        out.push((Channel::Sync, Message::GraphRequest { from: me, nonce: self.nonce }));
+                    }
+                    Vec::new()
+                }
+            } else {
+                Vec::new()
+            }
+        };
+        {
+            let mut state = self.lock();
+            if let Some(replica) = &state.replica
+                && now >= state.next_announce_ns
+            {
+                out.push((
+                    Channel::Sync,
+                    Message::Announce {
+                        from: me,
+                        nonce: self.nonce,
+                        replica: replica.id(),
+                        context: replica.context().clone(),
+                    },
+                ));
+                state.next_announce_ns = now + self.config.announce_period.as_nanos() as u64;
+            }
+        }
+        self.send(out);
+        self.signal(changes);
+    }
+}

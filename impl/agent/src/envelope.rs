@@ -1,0 +1,487 @@
+//! The agent-level wire envelope: what agents say to each other, around `dsr`'s delta encoding.
+//!
+//! Every sample starts with three bytes — a magic byte ([`MAGIC`]), the envelope version ([`VERSION`]) and the
+//! message kind — followed by the kind's fields in `postcard` and, for kinds that carry one delta or snapshot, the
+//! `dsr` bytes as the raw tail (no copy, no length). A one-attribute update is therefore the delta's ~40 bytes
+//! plus 4 or 5. **Decoding never panics**: foreign bytes, an unknown version or kind, truncated or trailing bytes,
+//! and lists over the limits are [`EnvelopeError`]s that say which kind and what; payload slices share the
+//! sample's buffer. Deltas inside are decoded (and checked) by the agent with `dsr::Delta::decode`.
+
+use bytes::Bytes;
+use dsr::{CausalContext, Dot, ReplicaId};
+use serde::{Deserialize, Serialize};
+
+use crate::AgentId;
+
+/// First byte of every envelope: a foreign sample on our topics is recognised at once.
+pub const MAGIC: u8 = 0xD5;
+/// The envelope version this build writes and reads.
+pub const VERSION: u8 = 1;
+/// Most version-vector entries in a carried context.
+pub const MAX_VV: usize = 1 << 16;
+/// Most out-of-order dots in a carried context.
+pub const MAX_CLOUD: usize = 1 << 20;
+/// Most deltas in one [`Message::Deltas`].
+pub const MAX_BATCH: usize = 1 << 16;
+
+/// One message between agents. Payload fields hold encoded `dsr` deltas.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Message {
+    /// The delta of one local operation.
+    Delta {
+        /// The writer.
+        from: AgentId,
+        /// `dsr::Delta::encode` bytes.
+        delta: Bytes,
+    },
+    /// Periodic anti-entropy announce: who I am (nonce of this life) and what I have seen.
+    Announce {
+        /// The announcer.
+        from: AgentId,
+        /// Random number of the announcer's life: another nonce with the same agent id is a collision.
+        nonce: u64,
+        /// The announcer's replica id.
+        replica: ReplicaId,
+        /// Everything the announcer has seen.
+        context: CausalContext,
+    },
+    /// "Send me what I lack": sent to a peer whose announce showed dots the sender has not seen.
+    MissingRequest {
+        /// The asker.
+        from: AgentId,
+        /// The peer asked.
+        to: AgentId,
+        /// The asker's context.
+        context: CausalContext,
+    },
+    /// Deltas a peer lacked (answer to [`Message::MissingRequest`]).
+    Deltas {
+        /// The sender.
+        from: AgentId,
+        /// The asker.
+        to: AgentId,
+        /// Encoded deltas.
+        deltas: Vec<Bytes>,
+    },
+    /// A whole state, when it is cheaper than the deltas or the history does not cover the gap.
+    Snapshot {
+        /// The sender.
+        from: AgentId,
+        /// The asker.
+        to: AgentId,
+        /// Encoded snapshot.
+        snapshot: Bytes,
+    },
+    /// A joining agent asks for the graph; any running agent answers.
+    GraphRequest {
+        /// The joiner.
+        from: AgentId,
+        /// Random number of the joiner's life.
+        nonce: u64,
+    },
+    /// The graph, for a joiner.
+    GraphAnswer {
+        /// The answering agent.
+        from: AgentId,
+        /// The joiner.
+        to: AgentId,
+        /// The joiner's nonce, echoed (an answer meant for an earlier life is ignored).
+        nonce: u64,
+        /// Encoded snapshot.
+        snapshot: Bytes,
+    },
+    /// A remote component call.
+    CallRequest {
+        /// The caller.
+        from: AgentId,
+        /// The agent whose runtime serves it.
+        to: AgentId,
+        /// Caller-chosen id, echoed in the reply.
+        call: u64,
+        /// Which registered method.
+        method: String,
+        /// Its argument bytes.
+        args: Bytes,
+    },
+    /// The reply to a [`Message::CallRequest`].
+    CallReply {
+        /// The serving agent.
+        from: AgentId,
+        /// The caller.
+        to: AgentId,
+        /// The request's id.
+        call: u64,
+        /// Result bytes, or an error message.
+        result: Result<Bytes, String>,
+    },
+}
+
+/// Why a sample is not a message of this build. Messages name the kind and what is wrong.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EnvelopeError {
+    /// Fewer than three header bytes.
+    #[error("envelope of {0} bytes is shorter than its 3-byte header")]
+    Short(usize),
+    /// Not our magic byte: some other program's sample.
+    #[error("foreign sample: first byte {found:#04x} is not the dsr envelope magic {MAGIC:#04x}")]
+    Foreign {
+        /// The byte found.
+        found: u8,
+    },
+    /// An envelope version this build does not read.
+    #[error("envelope version {found} is not supported (this build reads version {VERSION})")]
+    Version {
+        /// Version found.
+        found: u8,
+    },
+    /// An unknown message kind.
+    #[error("unknown message kind {0}")]
+    Kind(u8),
+    /// The kind's fields do not decode.
+    #[error("malformed {kind} message: {detail}")]
+    Malformed {
+        /// The message kind.
+        kind: &'static str,
+        /// What is wrong.
+        detail: String,
+    },
+}
+
+const K_DELTA: u8 = 1;
+const K_ANNOUNCE: u8 = 2;
+const K_MISSING_REQUEST: u8 = 3;
+const K_DELTAS: u8 = 4;
+const K_SNAPSHOT: u8 = 5;
+const K_GRAPH_REQUEST: u8 = 6;
+const K_GRAPH_ANSWER: u8 = 7;
+const K_CALL_REQUEST: u8 = 8;
+const K_CALL_REPLY: u8 = 9;
+
+/// A causal context as carried: version vector and out-of-order dots as plain pairs.
+#[derive(Serialize, Deserialize)]
+struct WireContext {
+    vv: Vec<(u32, u64)>,
+    cloud: Vec<(u32, u64)>,
+}
+
+impl WireContext {
+    fn of(ctx: &CausalContext) -> Self {
+        WireContext {
+            vv: ctx.version_vector().iter().map(|(r, n)| (r.0, *n)).collect(),
+            cloud: ctx.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
+        }
+    }
+
+    fn into_context(self, kind: &'static str) -> Result<CausalContext, EnvelopeError> {
+        if self.vv.len() > MAX_VV || self.cloud.len() > MAX_CLOUD {
+            return Err(EnvelopeError::Malformed {
+                kind,
+                detail: format!(
+                    "context of {} entries and {} dots is over the limits",
+                    self.vv.len(),
+                    self.cloud.len()
+                ),
+            });
+        }
+        if self.vv.iter().any(|(r, _)| *r == 0) || self.cloud.iter().any(|(r, c)| *r == 0 || *c == 0) {
+            return Err(EnvelopeError::Malformed { kind, detail: "context holds replica id 0 or counter 0".into() });
+        }
+        Ok(CausalContext::from_parts(
+            self.vv.into_iter().map(|(r, n)| (ReplicaId(r), n)).collect(),
+            self.cloud.into_iter().map(|(r, c)| Dot::new(ReplicaId(r), c)).collect(),
+        ))
+    }
+}
+
+/// A byte slice that postcard writes as one length-prefixed block (not byte by byte).
+struct Block<'a>(&'a [u8]);
+
+impl Serialize for Block<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_bytes(self.0)
+    }
+}
+
+fn header(kind: u8) -> Vec<u8> {
+    vec![MAGIC, VERSION, kind]
+}
+
+fn put<T: Serialize + ?Sized>(out: Vec<u8>, value: &T) -> Vec<u8> {
+    postcard::to_extend(value, out).expect("encoding into a Vec cannot fail")
+}
+
+impl Message {
+    /// The kind's name, for logs.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Message::Delta { .. } => "delta",
+            Message::Announce { .. } => "announce",
+            Message::MissingRequest { .. } => "missing-request",
+            Message::Deltas { .. } => "deltas",
+            Message::Snapshot { .. } => "snapshot",
+            Message::GraphRequest { .. } => "graph-request",
+            Message::GraphAnswer { .. } => "graph-answer",
+            Message::CallRequest { .. } => "call-request",
+            Message::CallReply { .. } => "call-reply",
+        }
+    }
+
+    /// The sending agent.
+    pub fn from(&self) -> AgentId {
+        match self {
+            Message::Delta { from, .. }
+            | Message::Announce { from, .. }
+            | Message::MissingRequest { from, .. }
+            | Message::Deltas { from, .. }
+            | Message::Snapshot { from, .. }
+            | Message::GraphRequest { from, .. }
+            | Message::GraphAnswer { from, .. }
+            | Message::CallRequest { from, .. }
+            | Message::CallReply { from, .. } => *from,
+        }
+    }
+
+    /// The addressee, for messages meant for one agent.
+    pub fn to(&self) -> Option<AgentId> {
+        match self {
+            Message::MissingRequest { to, .. }
+            | Message::Deltas { to, .. }
+            | Message::Snapshot { to, .. }
+            | Message::GraphAnswer { to, .. }
+            | Message::CallRequest { to, .. }
+            | Message::CallReply { to, .. } => Some(*to),
+            _ => None,
+        }
+    }
+
+    /// Encodes the message.
+    pub fn encode(&self) -> Bytes {
+        let out = match self {
+            Message::Delta { from, delta } => {
+                let mut out = put(header(K_DELTA), &from.0);
+                out.extend_from_slice(delta);
+                out
+            }
+            Message::Announce { from, nonce, replica, context } => {
+                put(header(K_ANNOUNCE), &(from.0, nonce, replica.0, WireContext::of(context)))
+            }
+            Message::MissingRequest { from, to, context } => {
+                put(header(K_MISSING_REQUEST), &(from.0, to.0, WireContext::of(context)))
+            }
+            Message::Deltas { from, to, deltas } => {
+                let blocks: Vec<Block<'_>> = deltas.iter().map(|d| Block(d)).collect();
+                put(header(K_DELTAS), &(from.0, to.0, blocks))
+            }
+            Message::Snapshot { from, to, snapshot } => {
+                let mut out = put(header(K_SNAPSHOT), &(from.0, to.0));
+                out.extend_from_slice(snapshot);
+                out
+            }
+            Message::GraphRequest { from, nonce } => put(header(K_GRAPH_REQUEST), &(from.0, nonce)),
+            Message::GraphAnswer { from, to, nonce, snapshot } => {
+                let mut out = put(header(K_GRAPH_ANSWER), &(from.0, to.0, nonce));
+                out.extend_from_slice(snapshot);
+                out
+            }
+            Message::CallRequest { from, to, call, method, args } => {
+                put(header(K_CALL_REQUEST), &(from.0, to.0, call, method, Block(args)))
+            }
+            Message::CallReply { from, to, call, result } => {
+                let result = result.as_ref().map(|b| Block(b));
+                put(header(K_CALL_REPLY), &(from.0, to.0, call, result))
+            }
+        };
+        Bytes::from(out)
+    }
+
+    /// Decodes a sample. Payload fields are slices of `bytes` (no copy).
+    ///
+    /// # Errors
+    /// [`EnvelopeError`] for anything that is not a well-formed message of this version.
+    pub fn decode(bytes: &Bytes) -> Result<Message, EnvelopeError> {
+        let [magic, version, kind, ..] = bytes[..] else {
+            return Err(EnvelopeError::Short(bytes.len()));
+        };
+        if magic != MAGIC {
+            return Err(EnvelopeError::Foreign { found: magic });
+        }
+        if version != VERSION {
+            return Err(EnvelopeError::Version { found: version });
+        }
+        let body = &bytes[3..];
+        let name = match kind {
+            K_DELTA => "delta",
+            K_ANNOUNCE => "announce",
+            K_MISSING_REQUEST => "missing-request",
+            K_DELTAS => "deltas",
+            K_SNAPSHOT => "snapshot",
+            K_GRAPH_REQUEST => "graph-request",
+            K_GRAPH_ANSWER => "graph-answer",
+            K_CALL_REQUEST => "call-request",
+            K_CALL_REPLY => "call-reply",
+            other => return Err(EnvelopeError::Kind(other)),
+        };
+        let malformed = |detail: String| EnvelopeError::Malformed { kind: name, detail };
+        // Fields, then the raw tail (a payload) or nothing.
+        let tail = |rest: &[u8]| bytes.slice_ref(rest);
+        let whole = |rest: &[u8]| {
+            if rest.is_empty() { Ok(()) } else { Err(malformed(format!("{} trailing bytes", rest.len()))) }
+        };
+        let take = |e: postcard::Error| malformed(format!("{e} (body of {} bytes)", body.len()));
+        let message = match kind {
+            K_DELTA => {
+                let (from, rest): (u32, _) = postcard::take_from_bytes(body).map_err(take)?;
+                if rest.is_empty() {
+                    return Err(malformed("no delta bytes".into()));
+                }
+                Message::Delta { from: AgentId(from), delta: tail(rest) }
+            }
+            K_ANNOUNCE => {
+                let ((from, nonce, replica, context), rest): ((u32, u64, u32, WireContext), _) =
+                    postcard::take_from_bytes(body).map_err(take)?;
+                whole(rest)?;
+                if replica == 0 {
+                    return Err(malformed("replica id 0".into()));
+                }
+                Message::Announce {
+                    from: AgentId(from),
+                    nonce,
+                    replica: ReplicaId(replica),
+                    context: context.into_context(name)?,
+                }
+            }
+            K_MISSING_REQUEST => {
+                let ((from, to, context), rest): ((u32, u32, WireContext), _) =
+                    postcard::take_from_bytes(body).map_err(take)?;
+                whole(rest)?;
+                Message::MissingRequest { from: AgentId(from), to: AgentId(to), context: context.into_context(name)? }
+            }
+            K_DELTAS => {
+                let ((from, to, blocks), rest): ((u32, u32, Vec<&[u8]>), _) =
+                    postcard::take_from_bytes(body).map_err(take)?;
+                whole(rest)?;
+                if blocks.len() > MAX_BATCH {
+                    return Err(malformed(format!("{} deltas in one batch (limit {MAX_BATCH})", blocks.len())));
+                }
+                Message::Deltas { from: AgentId(from), to: AgentId(to), deltas: blocks.into_iter().map(tail).collect() }
+            }
+            K_SNAPSHOT => {
+                let ((from, to), rest): ((u32, u32), _) = postcard::take_from_bytes(body).map_err(take)?;
+                if rest.is_empty() {
+                    return Err(malformed("no snapshot bytes".into()));
+                }
+                Message::Snapshot { from: AgentId(from), to: AgentId(to), snapshot: tail(rest) }
+            }
+            K_GRAPH_REQUEST => {
+                let ((from, nonce), rest): ((u32, u64), _) = postcard::take_from_bytes(body).map_err(take)?;
+                whole(rest)?;
+                Message::GraphRequest { from: AgentId(from), nonce }
+            }
+            K_GRAPH_ANSWER => {
+                let ((from, to, nonce), rest): ((u32, u32, u64), _) = postcard::take_from_bytes(body).map_err(take)?;
+                if rest.is_empty() {
+                    return Err(malformed("no snapshot bytes".into()));
+                }
+                Message::GraphAnswer { from: AgentId(from), to: AgentId(to), nonce, snapshot: tail(rest) }
+            }
+            K_CALL_REQUEST => {
+                let ((from, to, call, method, args), rest): ((u32, u32, u64, String, &[u8]), _) =
+                    postcard::take_from_bytes(body).map_err(take)?;
+                whole(rest)?;
+                Message::CallRequest { from: AgentId(from), to: AgentId(to), call, method, args: tail(args) }
+            }
+            _ => {
+                let ((from, to, call, result), rest): ((u32, u32, u64, Result<&[u8], String>), _) =
+                    postcard::take_from_bytes(body).map_err(take)?;
+                whole(rest)?;
+                Message::CallReply { from: AgentId(from), to: AgentId(to), call, result: result.map(tail) }
+            }
+        };
+        Ok(message)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn samples() -> Vec<Message> {
+        let mut replica = dsr::Replica::new(ReplicaId(7));
+        let (id, d1) = replica.insert_node(5, dsr::NewNode::new("world", "world")).unwrap();
+        let d2 = replica.set_attr(6, id, dsr::attrs::LEVEL, 3).unwrap();
+        let ctx = CausalContext::from_parts(vec![(ReplicaId(7), 2)], vec![Dot::new(ReplicaId(9), 4)]);
+        let (from, to) = (AgentId(3), AgentId(4));
+        vec![
+            Message::Delta { from, delta: Bytes::from(d2.encode()) },
+            Message::Announce { from, nonce: 99, replica: ReplicaId(7), context: ctx.clone() },
+            Message::MissingRequest { from, to, context: ctx },
+            Message::Deltas { from, to, deltas: vec![Bytes::from(d1.encode()), Bytes::from(d2.encode())] },
+            Message::Snapshot { from, to, snapshot: Bytes::from(replica.snapshot().encode()) },
+            Message::GraphRequest { from, nonce: 1 },
+            Message::GraphAnswer { from, to, nonce: 1, snapshot: Bytes::from(replica.snapshot().encode()) },
+            Message::CallRequest {
+                from,
+                to,
+                call: 8,
+                method: "Walk.set_speed".into(),
+                args: Bytes::from_static(b"1.5"),
+            },
+            Message::CallReply { from, to, call: 8, result: Ok(Bytes::from_static(b"ok")) },
+            Message::CallReply { from, to, call: 9, result: Err("no such method".into()) },
+        ]
+    }
+
+    #[test]
+    fn every_kind_round_trips_and_an_update_is_small() {
+        for message in samples() {
+            let bytes = message.encode();
+            assert_eq!(Message::decode(&bytes).unwrap(), message, "{}", message.kind());
+        }
+        let update = samples()[0].encode();
+        assert!(update.len() < 60, "a one-attribute update is {} bytes", update.len());
+    }
+
+    #[test]
+    fn foreign_version_kind_short_and_trailing_are_named_errors() {
+        let good = samples()[5].encode();
+        assert_eq!(Message::decode(&Bytes::from_static(b"ab")), Err(EnvelopeError::Short(2)));
+        let mut foreign = good.to_vec();
+        foreign[0] = b'R';
+        assert!(matches!(Message::decode(&Bytes::from(foreign)), Err(EnvelopeError::Foreign { found: b'R' })));
+        let mut version = good.to_vec();
+        version[1] = 9;
+        assert_eq!(Message::decode(&Bytes::from(version)), Err(EnvelopeError::Version { found: 9 }));
+        let mut kind = good.to_vec();
+        kind[2] = 200;
+        assert_eq!(Message::decode(&Bytes::from(kind)), Err(EnvelopeError::Kind(200)));
+        let mut trailing = good.to_vec();
+        trailing.push(0);
+        let error = Message::decode(&Bytes::from(trailing)).unwrap_err();
+        assert!(error.to_string().contains("graph-request") && error.to_string().contains("trailing"), "{error}");
+    }
+
+    proptest! {
+        #[test]
+        fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..256), kind in 0u8..12) {
+            let mut framed = vec![MAGIC, VERSION, kind];
+            framed.extend_from_slice(&bytes);
+            let _ = Message::decode(&Bytes::from(framed));
+            let _ = Message::decode(&Bytes::from(bytes));
+        }
+
+        #[test]
+        fn truncated_and_flipped_messages_never_panic(which in 0usize..10, cut in any::<prop::sample::Index>(),
+                                                      flip in any::<prop::sample::Index>(), bit in 0u8..8) {
+            let bytes = samples()[which].encode().to_vec();
+            let n = cut.index(bytes.len());
+            let _ = Message::decode(&Bytes::copy_from_slice(&bytes[..n]));
+            let mut flipped = bytes.clone();
+            let at = flip.index(flipped.len());
+            flipped[at] ^= 1 << bit;
+            if let Ok(Message::Delta { delta, .. }) = Message::decode(&Bytes::from(flipped)) {
+                let _ = dsr::Delta::decode(&delta);
+            }
+        }
+    }
+}
