@@ -120,6 +120,12 @@ impl dyn GraphAccess + '_ {
     }
 }
 
+impl std::fmt::Debug for dyn GraphAccess + '_ {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("GraphAccess")
+    }
+}
+
 /// A graph handle shared by the components of one BICA runtime (all on the scheduler thread).
 pub type SharedGraph = Rc<RefCell<dyn GraphAccess>>;
 

@@ -18,6 +18,8 @@
 //!
 //! Units follow the graph: mm and rad.
 
+pub mod attention;
+pub mod blobs;
 pub mod clusters;
 pub mod detections;
 pub mod ekf;
