@@ -174,7 +174,7 @@ struct WireDelta<'a> {
     /// The sender's clock, when it is not the highest value stamp (then it costs one byte).
     clock: Option<[u8; 8]>,
     /// A snapshot's joined operations (version vector, then out-of-order dots); one byte otherwise.
-    applied: Option<(Vec<(u32, u64)>, Vec<(u32, u64)>)>,
+    applied: Option<WireContext>,
     vv: Vec<(u32, u64)>,
     cloud: Vec<WireDot>,
     tombstones: Vec<u64>,
@@ -183,6 +183,9 @@ struct WireDelta<'a> {
     #[serde(borrow)]
     edges: Vec<WireEdge<'a>>,
 }
+
+/// A causal context on the wire: version vector `(replica, counter)`, then out-of-order dots.
+type WireContext = (Vec<(u32, u64)>, Vec<(u32, u64)>);
 
 /// A dot, relative to the delta's first generated dot when it is of the same replica.
 #[derive(Serialize, Deserialize, Clone, Copy)]
