@@ -19,6 +19,7 @@
 //! Units follow the graph: mm and rad.
 
 pub mod attention;
+pub mod behaviour;
 pub mod blobs;
 pub mod clusters;
 pub mod detections;
@@ -27,4 +28,5 @@ pub mod fixtures;
 pub mod graph;
 pub mod labelling;
 pub mod obstacles;
+pub mod roles;
 pub mod sensors;

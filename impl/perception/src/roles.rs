@@ -1,0 +1,135 @@
+//! One function per agent role, registering that role's BICA tree on a runtime given a graph handle, so a role
+//! process is a thin wrapper: make the agent, wrap its replica in a [`SharedGraph`], call the function, run.
+//! Each function also declares the perception attribute names ([`crate::graph::attrs`]) and registers a
+//! [`DebugCollector`] with every debuggable component of the tree marked.
+//!
+//! The `bridge` role (replaying recorded sensor data into the graph) is not here: it needs the replay side of the
+//! agents work; the writers it needs are [`crate::sensors::write_image`], [`crate::sensors::write_scan`] and
+//! [`crate::sensors::write_cloud`].
+
+use bica::debug::DebugCollector;
+use bica::prelude::*;
+
+use crate::attention::{Attention, GraphStimuli, Head, Scanner, StimulusKind};
+use crate::behaviour::{SearchTrackFsm, search_track};
+use crate::blobs::{BlobConfig, BlobDetector};
+use crate::graph::{SharedGraph, declare_perception_attrs};
+use crate::labelling::{ColourLabeller, LabelTables};
+use crate::obstacles::{LaserObstacleDetector, ObstacleConfig};
+use crate::sensors::{CameraReader, LaserReader};
+
+/// Why a role could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum RoleError {
+    /// The runtime refused a registration.
+    #[error("building role `{role}`: {source}")]
+    Bica {
+        /// The role.
+        role: &'static str,
+        /// The runtime's error.
+        source: BicaError,
+    },
+    /// The graph refused the perception names.
+    #[error("building role `{role}`: {source}")]
+    Graph {
+        /// The role.
+        role: &'static str,
+        /// The graph's error.
+        source: crate::graph::GraphError,
+    },
+}
+
+fn ms(period_ms: u64) -> u64 {
+    period_ms * 1_000_000
+}
+
+fn prepare(role: &'static str, graph: &SharedGraph) -> Result<(), RoleError> {
+    declare_perception_attrs(&mut *graph.borrow_mut()).map_err(|source| RoleError::Graph { role, source })
+}
+
+/// `camera-detector`: camera reader → colour labeller → blob detector (active), at `period_ms`.
+///
+/// # Errors
+/// [`RoleError`] if a registration fails.
+pub fn camera_detector<C: Clock>(
+    runtime: &mut Runtime<C>,
+    graph: SharedGraph,
+    camera_node: &str,
+    tables: LabelTables,
+    blobs: BlobConfig,
+    period_ms: u64,
+) -> Result<(), RoleError> {
+    let role = "camera-detector";
+    prepare(role, &graph)?;
+    let build = |runtime: &mut Runtime<C>| -> Result<(), BicaError> {
+        runtime.register(CameraReader::new(graph.clone(), camera_node), ms(period_ms))?;
+        let labeller = runtime.register(ColourLabeller::new(tables), ms(period_ms))?;
+        let detector = runtime.register(BlobDetector::new(graph.clone(), blobs), ms(period_ms))?;
+        let mut collector = DebugCollector::new(10_000);
+        collector.mark(labeller.id());
+        collector.mark(detector.id());
+        runtime.register(collector, ms(period_ms.max(100)))?;
+        runtime.activate::<BlobDetector>()?;
+        runtime.activate::<DebugCollector>()
+    };
+    build(runtime).map_err(|source| RoleError::Bica { role, source })
+}
+
+/// `laser-detector`: laser reader → obstacle detector (active), at `period_ms`.
+///
+/// # Errors
+/// [`RoleError`] if a registration fails.
+pub fn laser_detector<C: Clock>(
+    runtime: &mut Runtime<C>,
+    graph: SharedGraph,
+    laser_node: &str,
+    config: ObstacleConfig,
+    period_ms: u64,
+) -> Result<(), RoleError> {
+    let role = "laser-detector";
+    prepare(role, &graph)?;
+    let build = |runtime: &mut Runtime<C>| -> Result<(), BicaError> {
+        runtime.register(LaserReader::new(graph.clone(), laser_node), ms(period_ms))?;
+        let detector = runtime.register(LaserObstacleDetector::new(graph.clone(), config), ms(period_ms))?;
+        let mut collector = DebugCollector::new(10_000);
+        collector.mark(detector.id());
+        runtime.register(collector, ms(period_ms.max(100)))?;
+        runtime.activate::<LaserObstacleDetector>()?;
+        runtime.activate::<DebugCollector>()
+    };
+    build(runtime).map_err(|source| RoleError::Bica { role, source })
+}
+
+/// `attention`: the search/track behaviour (active) over attention, whose stimuli come from the graph's
+/// detection nodes (the detectors run in other agents), the head and the scanner.
+///
+/// # Errors
+/// [`RoleError`] if a registration fails.
+pub fn attention<C: Clock>(
+    runtime: &mut Runtime<C>,
+    graph: SharedGraph,
+    head_node: &str,
+    stimulus: StimulusKind,
+    period_ms: u64,
+) -> Result<(), RoleError> {
+    let role = "attention";
+    prepare(role, &graph)?;
+    let build = |runtime: &mut Runtime<C>| -> Result<(), BicaError> {
+        runtime.register(GraphStimuli::new(graph.clone(), head_node), ms(period_ms))?;
+        let mut attention = Attention::new().with_source::<GraphStimuli>(StimulusKind::Obstacle);
+        if stimulus != StimulusKind::Obstacle {
+            attention = attention.with_source::<GraphStimuli>(stimulus);
+        }
+        let attention = runtime.register(attention, ms(period_ms))?;
+        let head = runtime.register(Head::new(graph.clone(), head_node), ms(period_ms))?;
+        runtime.register(Scanner::new(graph.clone(), head_node, 1.0, 0.1), ms(period_ms))?;
+        runtime.register(search_track(stimulus, 1, 1_000_000_000)?, ms(period_ms))?;
+        let mut collector = DebugCollector::new(1000);
+        collector.mark(attention.id());
+        collector.mark(head.id());
+        runtime.register(collector, ms(period_ms.max(100)))?;
+        runtime.activate::<SearchTrackFsm>()?;
+        runtime.activate::<DebugCollector>()
+    };
+    build(runtime).map_err(|source| RoleError::Bica { role, source })
+}
