@@ -208,7 +208,7 @@ impl std::hash::Hash for Replica {
     }
 }
 
-/// Elements touched by one join, with what was visible before it (for indices and change events).
+/// The elements a join may change, for change events.
 #[derive(Default)]
 struct Touched {
     nodes: BTreeSet<NodeId>,
@@ -216,8 +216,8 @@ struct Touched {
     attrs: BTreeSet<(Element, Name)>,
 }
 
-/// What an element looked like before a join, when change tracking is on.
-struct Before {
+/// What is visible of the touched elements (before or after a join), for change events.
+struct Visibility {
     nodes: BTreeMap<NodeId, bool>,
     edges: BTreeMap<EdgeKey, bool>,
     attrs: BTreeMap<(Element, Name), Option<Dot>>,
@@ -868,7 +868,8 @@ impl Replica {
         }
     }
 
-    /// The elements a delta may change: its own entries, tombstoned nodes and their incident edges.
+    /// The elements a delta may change: its own entries, tombstoned nodes and their incident edges, and the
+    /// attributes of all of them.
     fn touched_by(&self, delta: &Delta) -> Touched {
         let mut touched = Touched::default();
         touched.nodes.extend(delta.store.nodes.keys().copied());
@@ -882,27 +883,25 @@ impl Replica {
         for id in nodes {
             touched.edges.extend(self.incident_edges(id));
         }
-        if self.changes.is_some() {
-            let mut names = |element: Element, attrs: Option<&Attrs>| {
-                for name in attrs.into_iter().flat_map(|a| a.keys()) {
-                    touched.attrs.insert((element.clone(), name.clone()));
-                }
-            };
-            for id in touched.nodes.clone() {
-                names(Element::Node(id), self.store.nodes.get(&id).map(|n| &n.attrs));
-                names(Element::Node(id), delta.store.nodes.get(&id).map(|n| &n.attrs));
+        let mut names = |element: Element, attrs: Option<&Attrs>| {
+            for name in attrs.into_iter().flat_map(|a| a.keys()) {
+                touched.attrs.insert((element.clone(), name.clone()));
             }
-            for key in touched.edges.clone() {
-                names(Element::Edge(key.clone()), self.store.edges.get(&key).map(|e| &e.attrs));
-                names(Element::Edge(key.clone()), delta.store.edges.get(&key).map(|e| &e.attrs));
-            }
+        };
+        for id in touched.nodes.clone() {
+            names(Element::Node(id), self.store.nodes.get(&id).map(|n| &n.attrs));
+            names(Element::Node(id), delta.store.nodes.get(&id).map(|n| &n.attrs));
+        }
+        for key in touched.edges.clone() {
+            names(Element::Edge(key.clone()), self.store.edges.get(&key).map(|e| &e.attrs));
+            names(Element::Edge(key.clone()), delta.store.edges.get(&key).map(|e| &e.attrs));
         }
         touched
     }
 
-    fn look(&self, touched: &Touched) -> Before {
+    fn look(&self, touched: &Touched) -> Visibility {
         let plant = self.plant;
-        Before {
+        Visibility {
             nodes: touched.nodes.iter().map(|id| (*id, self.node_visible(*id))).collect(),
             edges: touched.edges.iter().map(|key| (key.clone(), self.edge_visible(key))).collect(),
             attrs: touched
@@ -928,7 +927,7 @@ impl Replica {
         }
     }
 
-    fn record_changes(&mut self, before: &Before, after: &Before, origin: Option<ReplicaId>) {
+    fn record_changes(&mut self, before: &Visibility, after: &Visibility, origin: Option<ReplicaId>) {
         let mut events = Vec::new();
         let mut push = |change| events.push(ChangeEvent { change, origin });
         for (id, was) in &before.nodes {
