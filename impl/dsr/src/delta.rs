@@ -4,7 +4,8 @@
 //! produced by one local operation, or a whole replica state (a *snapshot*). Joining deltas is commutative,
 //! associative and idempotent, so they may travel in any order, any number of times.
 //!
-//! The wire format is `postcard` (varints) behind a one-byte header (format version and flags). Built-in attribute
+//! The wire format is `postcard` (varints) behind a one-byte header (format version and flags; the sender's clock
+//! and a snapshot's applied operations follow the body only when the flags say so). Built-in attribute
 //! names travel as their 1–2 byte code in the type dictionary, and dots as offsets from the delta's own dots where
 //! they can, so a one-attribute `f32` update is about 40 bytes. Decoding checks structure (ids, dots, names,
 //! limits) and returns a [`DeltaError`] that says where; it never panics. Type checks against the receiving
@@ -20,8 +21,15 @@ use crate::ids::{Dot, EdgeKey, Name, NodeId, ReplicaId, Stamp};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store};
 use crate::value::Value;
 
-/// The wire format version this build writes and reads.
+/// The wire format version this build writes and reads (the header byte's upper five bits).
 pub const WIRE_VERSION: u8 = 1;
+
+/// Header flag: the delta is a whole replica state.
+const FLAG_COMPLETE: u8 = 1;
+/// Header flag: the sender's clock follows the body (it is not the highest value stamp).
+const FLAG_CLOCK: u8 = 1 << 1;
+/// Header flag: a snapshot's applied operations follow the body.
+const FLAG_APPLIED: u8 = 1 << 2;
 
 /// The largest number of dots one delta may generate, and of items in one list (a decoding limit).
 pub const MAX_ITEMS: usize = 1 << 24;
@@ -138,8 +146,25 @@ impl Delta {
     /// Appends the encoded delta to `out`.
     pub fn encode_into(&self, out: &mut Vec<u8>) {
         let wire = to_wire(self);
-        out.push((WIRE_VERSION << 1) | u8::from(self.complete));
-        let encoded = postcard::to_extend(&wire, std::mem::take(out)).expect("encoding into a Vec cannot fail");
+        let clock = (self.clock != self.max_value_stamp()).then(|| self.clock.0.to_le_bytes());
+        let applied: Option<WireContext> = (!self.applied.is_empty()).then(|| {
+            (
+                self.applied.version_vector().iter().map(|(r, c)| (r.0, *c)).collect(),
+                self.applied.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
+            )
+        });
+        let mut header = WIRE_VERSION << 3;
+        header |= if self.complete { FLAG_COMPLETE } else { 0 };
+        header |= if clock.is_some() { FLAG_CLOCK } else { 0 };
+        header |= if applied.is_some() { FLAG_APPLIED } else { 0 };
+        out.push(header);
+        let mut encoded = postcard::to_extend(&wire, std::mem::take(out)).expect("encoding into a Vec cannot fail");
+        if let Some(clock) = clock {
+            encoded.extend_from_slice(&clock);
+        }
+        if let Some(applied) = applied {
+            encoded = postcard::to_extend(&applied, encoded).expect("encoding into a Vec cannot fail");
+        }
         *out = encoded;
     }
 
@@ -151,17 +176,31 @@ impl Delta {
     pub fn decode(bytes: &[u8]) -> Result<Delta, DeltaError> {
         let (&header, body) =
             bytes.split_first().ok_or_else(|| DeltaError::Encoding("empty input (no header byte)".into()))?;
-        let version = header >> 1;
+        let version = header >> 3;
         if version != WIRE_VERSION {
             return Err(DeltaError::Version { found: version, supported: WIRE_VERSION });
         }
-        let complete = header & 1 == 1;
         let (wire, rest): (WireDelta<'_>, &[u8]) = postcard::take_from_bytes(body)
             .map_err(|e| DeltaError::Encoding(format!("{e} (body of {} bytes)", body.len())))?;
+        let (clock, rest) = if header & FLAG_CLOCK != 0 {
+            let (clock, rest) = rest
+                .split_first_chunk::<8>()
+                .ok_or_else(|| DeltaError::Encoding(format!("clock: 8 bytes expected, {} left", rest.len())))?;
+            (Some(*clock), rest)
+        } else {
+            (None, rest)
+        };
+        let (applied, rest) = if header & FLAG_APPLIED != 0 {
+            let (applied, rest): (WireContext, &[u8]) = postcard::take_from_bytes(rest)
+                .map_err(|e| DeltaError::Encoding(format!("applied operations: {e}")))?;
+            (Some(applied), rest)
+        } else {
+            (None, rest)
+        };
         if !rest.is_empty() {
             return Err(DeltaError::Encoding(format!("{} trailing bytes after the delta", rest.len())));
         }
-        from_wire(wire, complete)
+        from_wire(wire, header & FLAG_COMPLETE != 0, clock, applied)
     }
 }
 
@@ -171,10 +210,6 @@ impl Delta {
 #[derive(Serialize, Deserialize)]
 struct WireDelta<'a> {
     origin: Option<(u32, u64, u32)>,
-    /// The sender's clock, when it is not the highest value stamp (then it costs one byte).
-    clock: Option<[u8; 8]>,
-    /// A snapshot's joined operations (version vector, then out-of-order dots); one byte otherwise.
-    applied: Option<WireContext>,
     vv: Vec<(u32, u64)>,
     cloud: Vec<WireDot>,
     tombstones: Vec<u64>,
@@ -287,13 +322,6 @@ fn to_wire(delta: &Delta) -> WireDelta<'_> {
     }
     WireDelta {
         origin: origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)),
-        clock: (delta.clock != delta.max_value_stamp()).then(|| delta.clock.0.to_le_bytes()),
-        applied: (!delta.applied.is_empty()).then(|| {
-            (
-                delta.applied.version_vector().iter().map(|(r, c)| (r.0, *c)).collect(),
-                delta.applied.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
-            )
-        }),
         vv,
         cloud,
         tombstones: delta.store.tombstones.iter().map(|id| id.0).collect(),
@@ -486,7 +514,12 @@ impl Decoder {
     }
 }
 
-fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
+fn from_wire(
+    wire: WireDelta<'_>,
+    complete: bool,
+    clock: Option<[u8; 8]>,
+    applied: Option<WireContext>,
+) -> Result<Delta, DeltaError> {
     let origin = Decoder::origin(wire.origin)?;
     let mut decoder = Decoder { origin, ctx: CausalContext::default() };
     check_len("context", wire.vv.len().saturating_add(wire.cloud.len()))?;
@@ -531,7 +564,7 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
         }
         store.edges.insert(key, entry);
     }
-    let applied = match wire.applied {
+    let applied = match applied {
         None => CausalContext::default(),
         Some((vv, cloud)) => {
             check_len("applied operations", vv.len().saturating_add(cloud.len()))?;
@@ -548,7 +581,7 @@ fn from_wire(wire: WireDelta<'_>, complete: bool) -> Result<Delta, DeltaError> {
         }
     };
     let mut delta = Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, applied, store };
-    delta.clock = match wire.clock {
+    delta.clock = match clock {
         Some(bytes) => Stamp(u64::from_le_bytes(bytes)),
         None => delta.max_value_stamp(),
     };
