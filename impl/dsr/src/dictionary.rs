@@ -208,6 +208,12 @@ builtin_attributes! {
     GPS_ALTITUDE: f64 = "gps_altitude", "Altitude, m.";
     STAMP_NS: u64 = "stamp_ns", "Time of the measurement a sensor attribute holds, ns.";
     SEQUENCE: u64 = "sequence", "Sequence number of the measurement a sensor attribute holds.";
+    // Detections and tracks (perception). New names go at the end: a name's index is its wire code.
+    TRACK_COVARIANCE_MM2: [f32; 4] = "track_covariance_mm2", "Position covariance of a tracked detection in its sensor's frame, mm² (row-major 2x2).";
+    TRACK_VELOCITY_MM_S: [f32; 2] = "track_velocity_mm_s", "Estimated velocity of a tracked detection in its sensor's frame, mm/s (x, y).";
+    TRACK_ID: u64 = "track_id", "Id of the track behind a detection node (unique per detector).";
+    BLOB_CLASS: u32 = "blob_class", "Colour class (index into the labelling configuration) of a blob detection.";
+    BLOB_AREA_PX: u32 = "blob_area_px", "Area of a blob detection, px.";
 }
 
 /// Built-in node types: those of the CORTEX graphs, plus the sensors and percepts the harness uses.

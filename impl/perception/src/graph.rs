@@ -219,18 +219,9 @@ impl GraphAccess for Replica {
 
 /// Attribute names the perception components add to the dictionary.
 pub mod attrs {
-    use dsr::AttrKey;
-
-    /// Position covariance of a tracked detection in its sensor's frame, mm² (row-major 2x2: xx, xy, yx, yy).
-    pub const TRACK_COVARIANCE_MM2: AttrKey<[f32; 4]> = AttrKey::new("track_covariance_mm2");
-    /// Estimated velocity of a tracked detection in its sensor's frame, mm/s (x, y).
-    pub const TRACK_VELOCITY_MM_S: AttrKey<[f32; 2]> = AttrKey::new("track_velocity_mm_s");
-    /// Id of the track behind a detection node (unique per detector).
-    pub const TRACK_ID: AttrKey<u64> = AttrKey::new("track_id");
-    /// Colour class (index into the labelling config) of a blob detection.
-    pub const BLOB_CLASS: AttrKey<u32> = AttrKey::new("blob_class");
-    /// Area of a blob detection, px.
-    pub const BLOB_AREA_PX: AttrKey<u32> = AttrKey::new("blob_area_px");
+    //! The detection and track attributes, now part of the built-in dictionary of `dsr` (so every agent agrees on
+    //! their types without declaring them).
+    pub use dsr::attrs::{BLOB_AREA_PX, BLOB_CLASS, TRACK_COVARIANCE_MM2, TRACK_ID, TRACK_VELOCITY_MM_S};
 }
 
 /// Declares the names in [`attrs`] in a dictionary (for agents that build their replica themselves).
