@@ -217,10 +217,9 @@ impl GraphAccess for Replica {
     }
 }
 
-/// Attribute names the perception components add to the dictionary.
+/// The detection and track attributes the perception components write. They are part of the built-in dictionary of
+/// `dsr`, so every agent agrees on their types without declaring them.
 pub mod attrs {
-    //! The detection and track attributes, now part of the built-in dictionary of `dsr` (so every agent agrees on
-    //! their types without declaring them).
     pub use dsr::attrs::{BLOB_AREA_PX, BLOB_CLASS, TRACK_COVARIANCE_MM2, TRACK_ID, TRACK_VELOCITY_MM_S};
 }
 
