@@ -180,6 +180,23 @@ struct State {
     pending_ask: Option<(AgentId, u64)>,
     peers: BTreeMap<AgentId, u64>,
     seed: Option<CortexGraph>,
+    /// The digest of the visible graph at a context, recomputed only when the context moved.
+    digest_cache: Option<(dsr::CausalContext, Digest)>,
+}
+
+impl State {
+    /// The digest of the visible graph (cached per context).
+    fn digest(&mut self) -> Option<Digest> {
+        let replica = self.replica.as_ref()?;
+        if let Some((ctx, digest)) = &self.digest_cache
+            && ctx == replica.context()
+        {
+            return Some(*digest);
+        }
+        let digest = replica.digest();
+        self.digest_cache = Some((replica.context().clone(), digest));
+        Some(digest)
+    }
 }
 
 struct Inner<T> {
@@ -238,6 +255,7 @@ impl<T: Transport + 'static> Agent<T> {
             pending_ask: None,
             peers: BTreeMap::new(),
             seed,
+            digest_cache: None,
         };
         let inner = Inner {
             config,
@@ -637,7 +655,7 @@ impl<T: Transport> Inner<T> {
                     Some(delta) => self.apply(&mut state, &sample, "delta", vec![delta]),
                     None => Vec::new(),
                 },
-                Message::Announce { from, nonce, replica, context } => {
+                Message::Announce { from, nonce, replica, context, digest } => {
                     self.note_incarnations(&mut state, &context);
                     if from == me {
                         self.check_collision(&mut state, nonce, Some(replica), "announce");
@@ -645,21 +663,33 @@ impl<T: Transport> Inner<T> {
                     let asked_recently = state.pending_ask.is_some_and(|(_, at)| {
                         now.saturating_sub(at) < 2 * self.config.announce_period.as_nanos() as u64
                     });
-                    if let Some(replica) = &state.replica
-                        && !asked_recently
-                        && !replica.context().includes(&context)
-                    {
+                    let ask = match &state.replica {
+                        Some(replica) if !asked_recently => {
+                            if !replica.context().includes(&context) {
+                                Some(false)
+                            } else if *replica.context() == context {
+                                // Same dots seen, yet another graph: repair with whole states.
+                                (state.digest().map(|d| d.0) != Some(digest)).then_some(true)
+                            } else {
+                                None
+                            }
+                        }
+                        _ => None,
+                    };
+                    if let (Some(full), Some(replica)) = (ask, &state.replica) {
                         out.push((
                             Channel::Sync,
-                            Message::MissingRequest { from: me, to: from, context: replica.context().clone() },
+                            Message::MissingRequest { from: me, to: from, context: replica.context().clone(), full },
                         ));
                         state.pending_ask = Some((from, now));
                     }
                     Vec::new()
                 }
-                Message::MissingRequest { from, context, .. } => {
+                Message::MissingRequest { from, context, full, .. } => {
                     if let Some(replica) = &state.replica {
-                        match replica.missing_for(&context) {
+                        let missing =
+                            if full { Missing::Snapshot(replica.snapshot()) } else { replica.missing_for(&context) };
+                        match missing {
                             Missing::UpToDate => {}
                             Missing::Deltas(deltas) => out.extend(self.batches(from, &deltas)),
                             Missing::Snapshot(snapshot) => out.push((
@@ -823,8 +853,10 @@ impl<T: Transport> Inner<T> {
         };
         {
             let mut state = self.lock();
-            if let Some(replica) = &state.replica
+            if state.replica.is_some()
                 && now >= state.next_announce_ns
+                && let Some(digest) = state.digest()
+                && let Some(replica) = &state.replica
             {
                 out.push((
                     Channel::Sync,
@@ -833,6 +865,7 @@ impl<T: Transport> Inner<T> {
                         nonce: self.nonce,
                         replica: replica.id(),
                         context: replica.context().clone(),
+                        digest: digest.0,
                     },
                 ));
                 state.next_announce_ns = now + self.config.announce_period.as_nanos() as u64;

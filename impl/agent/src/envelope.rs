@@ -44,6 +44,8 @@ pub enum Message {
         replica: ReplicaId,
         /// Everything the announcer has seen.
         context: CausalContext,
+        /// Digest of the announcer's visible graph: equal contexts with different digests call for a snapshot.
+        digest: [u8; 32],
     },
     /// "Send me what I lack": sent to a peer whose announce showed dots the sender has not seen.
     MissingRequest {
@@ -53,6 +55,8 @@ pub enum Message {
         to: AgentId,
         /// The asker's context.
         context: CausalContext,
+        /// Ask for a whole snapshot, whatever the contexts say (the digests differed).
+        full: bool,
     },
     /// Deltas a peer lacked (answer to [`Message::MissingRequest`]).
     Deltas {
@@ -262,11 +266,11 @@ impl Message {
                 out.extend_from_slice(delta);
                 out
             }
-            Message::Announce { from, nonce, replica, context } => {
-                put(header(K_ANNOUNCE), &(from.0, nonce, replica.0, WireContext::of(context)))
+            Message::Announce { from, nonce, replica, context, digest } => {
+                put(header(K_ANNOUNCE), &(from.0, nonce, replica.0, WireContext::of(context), digest))
             }
-            Message::MissingRequest { from, to, context } => {
-                put(header(K_MISSING_REQUEST), &(from.0, to.0, WireContext::of(context)))
+            Message::MissingRequest { from, to, context, full } => {
+                put(header(K_MISSING_REQUEST), &(from.0, to.0, WireContext::of(context), full))
             }
             Message::Deltas { from, to, deltas } => {
                 let blocks: Vec<Block<'_>> = deltas.iter().map(|d| Block(d)).collect();
@@ -337,7 +341,7 @@ impl Message {
                 Message::Delta { from: AgentId(from), delta: tail(rest) }
             }
             K_ANNOUNCE => {
-                let ((from, nonce, replica, context), rest): ((u32, u64, u32, WireContext), _) =
+                let ((from, nonce, replica, context, digest), rest): ((u32, u64, u32, WireContext, [u8; 32]), _) =
                     postcard::take_from_bytes(body).map_err(take)?;
                 whole(rest)?;
                 if replica == 0 {
@@ -348,13 +352,19 @@ impl Message {
                     nonce,
                     replica: ReplicaId(replica),
                     context: context.into_context(name)?,
+                    digest,
                 }
             }
             K_MISSING_REQUEST => {
-                let ((from, to, context), rest): ((u32, u32, WireContext), _) =
+                let ((from, to, context, full), rest): ((u32, u32, WireContext, bool), _) =
                     postcard::take_from_bytes(body).map_err(take)?;
                 whole(rest)?;
-                Message::MissingRequest { from: AgentId(from), to: AgentId(to), context: context.into_context(name)? }
+                Message::MissingRequest {
+                    from: AgentId(from),
+                    to: AgentId(to),
+                    context: context.into_context(name)?,
+                    full,
+                }
             }
             K_DELTAS => {
                 let ((from, to, blocks), rest): ((u32, u32, Vec<&[u8]>), _) =
@@ -391,8 +401,8 @@ impl Message {
                 Message::CallRequest { from: AgentId(from), to: AgentId(to), call, method, args: tail(args) }
             }
             _ => {
-                let ((from, to, call, result), rest): ((u32, u32, u64, Result<&[u8], String>), _) =
-                    postcard::take_from_bytes(body).map_err(take)?;
+                type Reply<'b> = (u32, u32, u64, Result<&'b [u8], String>);
+                let ((from, to, call, result), rest): (Reply<'_>, _) = postcard::take_from_bytes(body).map_err(take)?;
                 whole(rest)?;
                 Message::CallReply { from: AgentId(from), to: AgentId(to), call, result: result.map(tail) }
             }
@@ -414,8 +424,8 @@ mod tests {
         let (from, to) = (AgentId(3), AgentId(4));
         vec![
             Message::Delta { from, delta: Bytes::from(d2.encode()) },
-            Message::Announce { from, nonce: 99, replica: ReplicaId(7), context: ctx.clone() },
-            Message::MissingRequest { from, to, context: ctx },
+            Message::Announce { from, nonce: 99, replica: ReplicaId(7), context: ctx.clone(), digest: [3; 32] },
+            Message::MissingRequest { from, to, context: ctx, full: true },
             Message::Deltas { from, to, deltas: vec![Bytes::from(d1.encode()), Bytes::from(d2.encode())] },
             Message::Snapshot { from, to, snapshot: Bytes::from(replica.snapshot().encode()) },
             Message::GraphRequest { from, nonce: 1 },
