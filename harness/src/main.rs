@@ -26,6 +26,10 @@ enum Command {
     Graph(commands::graph::GraphArgs),
     /// Model-check the real implementation (convergence, scheduler, mutants).
     Check(commands::check::CheckArgs),
+    /// Replay a ROS 2 MCAP log into the graph through a bridge agent.
+    Replay(commands::replay::ReplayArgs),
+    /// Check the bundled datasets against their manifest.
+    Datasets(commands::datasets::DatasetsArgs),
 }
 
 fn main() -> ExitCode {
@@ -33,6 +37,8 @@ fn main() -> ExitCode {
     let outcome = match cli.command {
         Command::Graph(args) => commands::graph::run(args),
         Command::Check(args) => commands::check::run(args),
+        Command::Replay(args) => commands::replay::run(args),
+        Command::Datasets(args) => commands::datasets::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -3,4 +3,6 @@
 //! `graph`.
 
 pub mod check;
+pub mod datasets;
 pub mod graph;
+pub mod replay;

@@ -454,7 +454,7 @@ impl Reader {
             }
             let (opcode, body) = match record_at(file, pos) {
                 Ok(record) => record,
-                Err(damage) => return Err((place.damage("record", damage), pos as u64)),
+                Err((name, kind)) => return Err((place.damage(name, kind), pos as u64)),
             };
             let name = record_name(opcode);
             let end = body.end;
@@ -597,7 +597,7 @@ impl Reader {
         let mut pos = 0;
         while pos < records.len() {
             let place = Place { offset: pos as u64, chunk: Some(chunk_offset) };
-            let (opcode, body) = record_at(&records, pos).map_err(|kind| place.damage("record", kind))?;
+            let (opcode, body) = record_at(&records, pos).map_err(|(name, kind)| place.damage(name, kind))?;
             let end = body.end;
             match opcode {
                 OP_SCHEMA | OP_CHANNEL | OP_MESSAGE => self.read_record(opcode, &records, body, place, chunk_offset)?,
@@ -613,27 +613,15 @@ impl Reader {
     }
 }
 
-/// The opcode and body range of the record at `pos`.
-fn record_at(buf: &[u8], pos: usize) -> Result<(u8, std::ops::Range<usize>), DamageKind> {
+/// The opcode and body range of the record at `pos`; on failure, the record's name (if its opcode could be read).
+fn record_at(buf: &[u8], pos: usize) -> Result<(u8, std::ops::Range<usize>), (&'static str, DamageKind)> {
     let mut fields = Fields { bytes: buf, pos };
-    let opcode = fields.u8("opcode")?;
-    let len = fields.u64("record length")?;
+    let opcode = fields.u8("opcode").map_err(|kind| ("record", kind))?;
+    let name = record_name(opcode);
+    let len = fields.u64("record length").map_err(|kind| (name, kind))?;
     let start = fields.pos;
-    fields.take("record body", len).map_err(|kind| match kind {
-        DamageKind::Truncated { needed, available, .. } => {
-            DamageKind::Truncated { field: record_name_field(opcode), needed, available }
-        }
-        other => other,
-    })?;
+    fields.take("record body", len).map_err(|kind| (name, kind))?;
     Ok((opcode, start..fields.pos))
-}
-
-fn record_name_field(opcode: u8) -> &'static str {
-    match opcode {
-        OP_CHUNK => "chunk body",
-        OP_MESSAGE => "message body",
-        _ => "record body",
-    }
 }
 
 /// Decompresses a chunk, reading at most one byte more than declared (so a lying size cannot exhaust memory).

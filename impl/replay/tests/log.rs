@@ -94,8 +94,8 @@ fn unclosed_chunk_is_an_error_after_the_header() {
     let path = fixtures().join("chunk_not_closed.mcap");
     let error = Log::open(&path, ReadOptions::default()).unwrap_err();
     let LogError::Damaged { damage, .. } = &error else { panic!("{error}") };
-    assert_eq!(damage.record, "record");
-    assert!(matches!(damage.kind, DamageKind::Truncated { .. }), "{error}");
+    assert_eq!(damage.record, "chunk");
+    assert!(matches!(damage.kind, DamageKind::Truncated { field: "record body", .. }), "{error}");
     assert!(damage.offset > 8, "after the header: {error}");
     let recovered = Log::open(&path, ReadOptions { recover: true, ..ReadOptions::default() }).unwrap();
     assert_eq!(recovered.profile, "", "the header was read");
@@ -153,7 +153,7 @@ fn truncated_real_log_recovers_a_prefix() {
     let error = Log::from_bytes("husky", cut.clone(), ReadOptions::default()).unwrap_err();
     let LogError::Damaged { damage, .. } = &error else { panic!("{error}") };
     assert!(matches!(damage.kind, DamageKind::Truncated { .. }), "{error}");
-    assert_eq!(damage.record, "record");
+    assert_eq!(damage.record, "chunk", "{error}");
     let recovered = Log::from_bytes("husky", cut, ReadOptions { recover: true, ..ReadOptions::default() }).unwrap();
     assert!(!recovered.messages.is_empty() && recovered.messages.len() < full.messages.len());
     assert_eq!(recovered.unread_bytes, bytes.len() as u64 / 2 - damage.offset);

@@ -1,0 +1,209 @@
+//! `cortex replay`: replay a ROS 2 MCAP log into the graph through a bridge agent and check that every agent ends
+//! with the same graph.
+//!
+//! The log is memory-mapped and read with `replay::log` (damage is an error that says where, or, with
+//! `--recover`, the end of what is replayed); messages are paced at the recorded timing divided by `--rate` (or as
+//! fast as possible with `--rate max`) and looped `--loop` times; the bridge writes them into its replica and its
+//! deltas go to the other agents. With `--transport inproc` the agents are replicas in this process joined by the
+//! seeded in-memory delivery of `replay::inproc`; `--transport rtps` (agents as processes) arrives with the agents
+//! issue and is refused until then. The summary gives messages by type, unknown and skipped ones, bytes, deltas,
+//! throughput and whether the final digests are equal (exit code 1 if they are not).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use clap::{Args, ValueEnum};
+use dsr::{Replica, ReplicaId};
+use replay::inproc::{self, InProcNetwork};
+use replay::log::{Log, ReadOptions};
+use replay::{Bridge, BridgeOptions, BridgeStats, Pacer, Rate};
+use serde::Serialize;
+
+/// How the agents are connected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Transport {
+    /// Replicas in this process, seeded in-memory delivery.
+    Inproc,
+    /// Agents as processes over RTPS (arrives with the agents issue).
+    Rtps,
+}
+
+/// Arguments of `cortex replay`.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// A ROS 2 MCAP file (`cdr` messages, `ros2msg` schemas).
+    file: PathBuf,
+    /// Number of agents, the bridge included (1 to 64).
+    #[arg(long, default_value_t = 3)]
+    agents: u32,
+    /// How the agents are connected.
+    #[arg(long, value_enum, default_value_t = Transport::Inproc)]
+    transport: Transport,
+    /// Speed: a factor on the recorded timing (2 plays twice as fast) or `max`.
+    #[arg(long, default_value = "1")]
+    rate: Rate,
+    /// Play the log this many times.
+    #[arg(long = "loop", default_value_t = 1)]
+    loops: u32,
+    /// Only these topics (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    topics: Option<Vec<String>>,
+    /// Replay what is readable before damage in the file instead of failing.
+    #[arg(long)]
+    recover: bool,
+    /// Carry messages of unknown types as opaque byte attributes instead of skipping them.
+    #[arg(long)]
+    opaque: bool,
+    /// Seed of the in-process delivery order.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Deltas in flight in the in-process delivery before one is delivered (reordering depth).
+    #[arg(long, default_value_t = 64)]
+    window: usize,
+    /// Print stable, machine-readable JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What a replay did.
+#[derive(Debug, Serialize)]
+struct Summary {
+    file: String,
+    transport: &'static str,
+    agents: u32,
+    rate: String,
+    loops: u32,
+    file_bytes: u64,
+    damage: Option<String>,
+    unread_bytes: u64,
+    messages: u64,
+    payload_bytes: u64,
+    seconds: f64,
+    messages_per_second: f64,
+    megabytes_per_second: f64,
+    bridge: BridgeStats,
+    deltas: u64,
+    delta_bytes: u64,
+    deliveries: u64,
+    digests: Vec<String>,
+    digests_equal: bool,
+}
+
+/// Runs `cortex replay`.
+///
+/// # Errors
+/// A file that cannot be read (or is damaged, without `--recover`), bad arguments, the RTPS transport, a delta a
+/// receiver refuses, or final digests that differ.
+pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    if args.transport == Transport::Rtps {
+        bail!(
+            "--transport rtps needs the agents as processes, which arrive with the agents issue (5); use --transport inproc"
+        );
+    }
+    if !(1..=64).contains(&args.agents) {
+        bail!("--agents must be between 1 and 64, not {}", args.agents);
+    }
+    let options = ReadOptions { recover: args.recover, ..ReadOptions::default() };
+    let log = Log::open(&args.file, options).context("cannot replay")?;
+    if let Some(damage) = &log.damage {
+        eprintln!(
+            "warning: {}: {damage}; replaying the {} messages read before it ({} bytes unread)",
+            log.file,
+            log.messages.len(),
+            log.unread_bytes
+        );
+    }
+    let dictionary = replay::bridge::dictionary().context("bridge dictionary")?;
+    let mut replica = Replica::with_dictionary(ReplicaId(1), dictionary.clone());
+    let mut network = InProcNetwork::new(args.agents - 1, 2, &dictionary, args.seed, args.window);
+    let mut bridge = Bridge::new(BridgeOptions { topics: args.topics.clone(), opaque: args.opaque });
+    let origin = Instant::now();
+    let clock = move || origin.elapsed().as_nanos() as u64;
+    let pacer = Pacer::new(&log.messages, args.rate, args.loops, clock);
+    let wait = |due_ns: u64| {
+        let now = origin.elapsed().as_nanos() as u64;
+        if due_ns > now {
+            std::thread::sleep(Duration::from_nanos(due_ns - now));
+        }
+    };
+    let started = Instant::now();
+    let driven = inproc::drive(pacer, &mut bridge, &mut replica, &mut network, wait).context("replay")?;
+    let seconds = started.elapsed().as_secs_f64();
+    let (digests, digests_equal) = inproc::digests(&replica, &network);
+    let stats = network.stats();
+    let summary = Summary {
+        file: args.file.display().to_string(),
+        transport: "inproc",
+        agents: args.agents,
+        rate: match args.rate {
+            Rate::Max => "max".to_owned(),
+            Rate::Factor(factor) => factor.to_string(),
+        },
+        loops: args.loops,
+        file_bytes: log.file_bytes,
+        damage: log.damage.as_ref().map(ToString::to_string),
+        unread_bytes: log.unread_bytes,
+        messages: driven.messages,
+        payload_bytes: driven.bytes,
+        seconds,
+        messages_per_second: driven.messages as f64 / seconds.max(1e-9),
+        megabytes_per_second: driven.bytes as f64 / 1e6 / seconds.max(1e-9),
+        bridge: bridge.stats().clone(),
+        deltas: driven.deltas,
+        delta_bytes: stats.encoded_bytes,
+        deliveries: stats.deliveries,
+        digests: digests.iter().map(ToString::to_string).collect(),
+        digests_equal,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print!("{}", text(&summary));
+    }
+    if !digests_equal {
+        bail!("the agents' final digests differ: {}", summary.digests.join(" "));
+    }
+    Ok(())
+}
+
+fn text(s: &Summary) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "replay {} ({} bytes) over {} with {} agents, rate {}, {} loop(s)",
+        s.file, s.file_bytes, s.transport, s.agents, s.rate, s.loops
+    );
+    if let Some(damage) = &s.damage {
+        let _ = writeln!(out, "  damage        {damage} ({} bytes unread)", s.unread_bytes);
+    }
+    let _ = writeln!(
+        out,
+        "  messages      {} in {:.3} s: {:.0} messages/s, {:.1} MB/s of payload ({} bytes)",
+        s.messages, s.seconds, s.messages_per_second, s.megabytes_per_second, s.payload_bytes
+    );
+    let table = |out: &mut String, title: &str, rows: &BTreeMap<String, u64>| {
+        for (name, count) in rows {
+            let _ = writeln!(out, "  {title:<13} {count:>8}  {name}");
+        }
+    };
+    table(&mut out, "decoded", &s.bridge.decoded);
+    table(&mut out, "unknown", &s.bridge.unknown);
+    let b = &s.bridge;
+    let _ = writeln!(
+        out,
+        "  carried       {} opaque, {} filtered out, {} TF transforms refused",
+        b.opaque, b.filtered, b.tf_refused
+    );
+    table(&mut out, "errors", &b.errors);
+    for error in &b.first_errors {
+        let _ = writeln!(out, "    {error}");
+    }
+    let _ =
+        writeln!(out, "  deltas        {} ({} bytes encoded), {} deliveries", s.deltas, s.delta_bytes, s.deliveries);
+    let verdict = if s.digests_equal { "equal" } else { "DIFFER" };
+    let _ = writeln!(out, "  digests       {verdict}: {}", s.digests.join(" "));
+    out
+}

@@ -1,0 +1,76 @@
+//! `cortex replay` and `cortex datasets verify` from the command line: a bundled log replays in process with 3
+//! agents to equal digests, a damaged file is an error that says where (or a recovered prefix with `--recover`), the
+//! RTPS transport is refused until the agents exist, and a log that does not match the manifest fails the check.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn cortex(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_cortex")).args(args).output().expect("cortex runs")
+}
+
+fn repo(path: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path).display().to_string()
+}
+
+#[test]
+fn bundled_log_replays_to_equal_digests() {
+    let log = repo("datasets/logs/ouster_os1-128_1scan.mcap");
+    let out = cortex(&["replay", &log, "--agents", "3", "--rate", "max", "--loop", "2", "--opaque", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    assert_eq!(summary["digests_equal"], true);
+    assert_eq!(summary["digests"].as_array().unwrap().len(), 3);
+    assert_eq!(summary["messages"], 2 * 20);
+    assert_eq!(summary["bridge"]["decoded"]["sensor_msgs/msg/PointCloud2"], 2);
+    assert_eq!(summary["bridge"]["unknown"]["ouster_sensor_msgs/msg/PacketMsg"], 2 * 18);
+    assert_eq!(summary["bridge"]["opaque"], 2 * 19);
+    let out = cortex(&["replay", &log, "--rate", "max", "--topics", "/ouster/points"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("19 filtered out") && text.contains("digests       equal"), "{text}");
+}
+
+#[test]
+fn damaged_files_and_unsupported_transport_are_errors() {
+    let out = cortex(&["replay", &repo("impl/replay/tests/fixtures/chunk_not_closed.mcap")]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("chunk record at byte 39: truncated"), "{stderr}");
+    let padded = repo("impl/replay/tests/fixtures/zstd_chunk_with_padding.mcap");
+    let out = cortex(&["replay", &padded]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("undefined channel 0"));
+    let out = cortex(&["replay", &padded, "--recover", "--rate", "max"]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("replaying the 0 messages read before it"));
+    let out = cortex(&["replay", &repo("datasets/logs/ouster_os1-128_1scan.mcap"), "--transport", "rtps"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("arrive with the agents issue"));
+}
+
+#[test]
+fn datasets_verify_passes_and_catches_a_changed_file() {
+    let out = cortex(&["datasets", "verify", "--dir", &repo("datasets/logs"), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(report["files"].as_array().unwrap().iter().all(|file| file["ok"] == true));
+
+    // A copy of the manifest with one file replaced by a damaged copy and one missing.
+    let dir = std::env::temp_dir().join(format!("cortex-datasets-verify-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let source = PathBuf::from(repo("datasets/logs"));
+    std::fs::copy(source.join("manifest.json"), dir.join("manifest.json")).unwrap();
+    let mut husky = std::fs::read(source.join("husky_gps_imu_odom_robot_localization_test1.mcap")).unwrap();
+    husky[1000] ^= 1;
+    std::fs::write(dir.join("husky_gps_imu_odom_robot_localization_test1.mcap"), husky).unwrap();
+    std::fs::copy(source.join("sick_tim7xx_scan_10s.mcap"), dir.join("sick_tim7xx_scan_10s.mcap")).unwrap();
+    let out = cortex(&["datasets", "verify", "--dir", &dir.display().to_string()]);
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("husky_gps_imu_odom_robot_localization_test1.mcap     CHECKSUM MISMATCH"), "{stdout}");
+    assert!(stdout.contains("sick_tim7xx_scan_10s.mcap                            ok"), "{stdout}");
+    assert!(stdout.contains("euroc_v1_01_easy_cam0_1s.mcap                        MISSING"), "{stdout}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("3 of 4 files"), "{}", String::from_utf8_lossy(&out.stderr));
+}
