@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// A source of time for the runtime driver and for step measurements.
 pub trait Clock {
@@ -16,16 +16,23 @@ pub trait Clock {
     fn sleep_until_ns(&self, deadline_ns: u64);
 }
 
-/// The real monotonic clock (`std::time::Instant`) plus the thread CPU clock.
-#[derive(Debug, Clone, Copy)]
+/// The real monotonic clock plus the thread CPU clock.
+///
+/// Reads the calibrated time-stamp counter through `quanta` (a few nanoseconds per read; `quanta` falls back to the
+/// OS monotonic clock where the counter is not reliable). The scheduler reads the clock twice per step, and with
+/// `std::time::Instant` (about 25 ns per read on this project's machines) those reads were half its overhead.
+#[derive(Debug, Clone)]
 pub struct MonotonicClock {
-    origin: Instant,
+    clock: quanta::Clock,
+    origin: u64,
 }
 
 impl MonotonicClock {
     /// Creates a clock whose zero is now.
     pub fn new() -> Self {
-        Self { origin: Instant::now() }
+        let clock = quanta::Clock::new();
+        let origin = clock.raw();
+        Self { clock, origin }
     }
 }
 
@@ -37,8 +44,8 @@ impl Default for MonotonicClock {
 
 impl Clock for MonotonicClock {
     fn now_ns(&self) -> u64 {
-        // u64 nanoseconds last 584 years, so the truncation cannot happen in practice.
-        u64::try_from(self.origin.elapsed().as_nanos()).unwrap_or(u64::MAX)
+        // u64 nanoseconds last 584 years.
+        self.clock.delta_as_nanos(self.origin, self.clock.raw())
     }
 
     fn thread_cpu_ns(&self) -> u64 {

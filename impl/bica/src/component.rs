@@ -337,7 +337,7 @@ pub(crate) fn run_one(
     if let Some(gap_ns) = info.reactivated_after_gap_ns {
         component.on_reactivated(gap_ns);
     }
-    let cpu_start_ns = ctx.stats.cpu_time_enabled().then(|| ctx.clock.thread_cpu_ns());
+    let cpu_start_ns = ctx.stats.should_time_cpu(id, started_ns).then(|| ctx.clock.thread_cpu_ns());
     let result = component.step(ctx);
     let finished_ns = ctx.clock.now_ns();
     let cpu_ns = cpu_start_ns.map(|start| ctx.clock.thread_cpu_ns().saturating_sub(start));

@@ -79,6 +79,7 @@ struct ComponentSeries {
     lateness: Series,
     first_run_ns: Option<u64>,
     last_run_ns: u64,
+    last_cpu_timed_ns: Option<u64>,
 }
 
 /// Statistics collector, fed by the runtime after every run.
@@ -86,17 +87,28 @@ struct ComponentSeries {
 pub struct Statistics {
     per_component: Vec<ComponentSeries>,
     cpu_time_enabled: bool,
+    cpu_time_min_interval_ns: u64,
 }
 
 impl Statistics {
-    /// Creates a collector; `cpu_time_enabled` adds two thread-CPU-clock reads per step.
-    pub fn new(cpu_time_enabled: bool) -> Self {
-        Self { per_component: Vec::new(), cpu_time_enabled }
+    /// Creates a collector; with `cpu_time_enabled`, a component's thread CPU time is measured on a run when at
+    /// least `cpu_time_min_interval_ns` has passed since its last measured run (0: every run).
+    pub fn new(cpu_time_enabled: bool, cpu_time_min_interval_ns: u64) -> Self {
+        Self { per_component: Vec::new(), cpu_time_enabled, cpu_time_min_interval_ns }
     }
 
-    /// Whether thread CPU time is measured per step.
+    /// Whether thread CPU time is measured at all.
     pub fn cpu_time_enabled(&self) -> bool {
         self.cpu_time_enabled
+    }
+
+    /// Whether the run of `id` starting at `now_ns` should have its CPU time measured.
+    pub fn should_time_cpu(&self, id: ComponentId, now_ns: u64) -> bool {
+        if !self.cpu_time_enabled {
+            return false;
+        }
+        let last = self.per_component.get(id.0 as usize).and_then(|series| series.last_cpu_timed_ns);
+        last.is_none_or(|last| now_ns.saturating_sub(last) >= self.cpu_time_min_interval_ns)
     }
 
     /// Records one run of `id`.
@@ -116,6 +128,7 @@ impl Statistics {
         series.wall.record(finished_ns.saturating_sub(started_ns));
         if let Some(cpu_ns) = cpu_ns {
             series.cpu.record(cpu_ns);
+            series.last_cpu_timed_ns = Some(started_ns);
         }
         series.lateness.record(info.lateness_ns);
         series.first_run_ns.get_or_insert(started_ns);
