@@ -30,6 +30,10 @@ enum Command {
     Replay(commands::replay::ReplayArgs),
     /// Check the bundled datasets against their manifest.
     Datasets(commands::datasets::DatasetsArgs),
+    /// Run one DSR_d agent over RTPS until interrupted.
+    Agent(commands::agent::AgentArgs),
+    /// Measure agents: round-trip time and graph join.
+    Bench(commands::bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -39,6 +43,8 @@ fn main() -> ExitCode {
         Command::Check(args) => commands::check::run(args),
         Command::Replay(args) => commands::replay::run(args),
         Command::Datasets(args) => commands::datasets::run(args),
+        Command::Agent(args) => commands::agent::run(args),
+        Command::Bench(args) => commands::bench::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,6 +2,8 @@
 //! `anyhow::Result`. Later subcommands (`check`, `agent`, `bench`, `replay`, `report`, `inspect`) go beside
 //! `graph`.
 
+pub mod agent;
+pub mod bench;
 pub mod check;
 pub mod datasets;
 pub mod graph;
