@@ -1,6 +1,9 @@
 //! Tests of the ROS 2 decoders and the bridge on real messages of the bundled logs. Expected values were read
 //! independently with the Python `mcap-ros2-support` decoder (see `datasets/logs/README.md`).
 
+// The expected f32 values are written as Python printed them (the shortest f64 that rounds to them).
+#![allow(clippy::excessive_precision)]
+
 use std::path::Path;
 use std::sync::Arc;
 
