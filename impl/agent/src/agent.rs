@@ -180,8 +180,15 @@ struct State {
     pending_ask: Option<(AgentId, u64)>,
     peers: BTreeMap<AgentId, u64>,
     seed: Option<CortexGraph>,
-    /// The digest of the visible graph at a context, recomputed only when the context moved.
+    /// The digest of the visible graph at a context (cleared on every remote join; a local write moves the
+    /// context).
     digest_cache: Option<(dsr::CausalContext, Digest)>,
+    /// The encoded snapshot at a context, cleared like `digest_cache`: several joiners (or repeated requests)
+    /// cost one encoding.
+    snapshot_cache: Option<(dsr::CausalContext, Bytes)>,
+    /// Graph requests answered recently, by (joiner, nonce), with the time: a joiner that repeats its request
+    /// while a large answer is still on its way gets no second copy within [`ANSWER_HOLD_NS`].
+    answered: BTreeMap<(AgentId, u64), u64>,
 }
 
 impl State {
@@ -197,7 +204,25 @@ impl State {
         self.digest_cache = Some((replica.context().clone(), digest));
         Some(digest)
     }
+
+    /// The encoded snapshot (cached per context).
+    fn snapshot_bytes(&mut self) -> Option<Bytes> {
+        let replica = self.replica.as_ref()?;
+        if let Some((ctx, bytes)) = &self.snapshot_cache
+            && ctx == replica.context()
+        {
+            return Some(bytes.clone());
+        }
+        let bytes = Bytes::from(replica.snapshot().encode());
+        self.snapshot_cache = Some((replica.context().clone(), bytes.clone()));
+        Some(bytes)
+    }
 }
+
+/// How long a graph request stays answered (a repeat within it gets no second copy).
+const ANSWER_HOLD_NS: u64 = 1_000_000_000;
+/// Most remembered answered requests.
+const MAX_ANSWERED: usize = 1024;
 
 struct Inner<T> {
     config: AgentConfig,
@@ -256,6 +281,8 @@ impl<T: Transport + 'static> Agent<T> {
             peers: BTreeMap::new(),
             seed,
             digest_cache: None,
+            snapshot_cache: None,
+            answered: BTreeMap::new(),
         };
         let inner = Inner {
             config,
@@ -593,6 +620,9 @@ impl<T: Transport> Inner<T> {
 
     /// Joins remote deltas into the replica; returns the changes they made.
     fn apply(&self, state: &mut State, sample: &Sample, kind: &str, deltas: Vec<Arc<Delta>>) -> Vec<dsr::ChangeEvent> {
+        // A join can change the store without moving the context (the snapshot repair): drop the caches.
+        state.digest_cache = None;
+        state.snapshot_cache = None;
         let Some(replica) = state.replica.as_mut() else {
             for delta in deltas {
                 if state.buffered.len() >= self.config.max_buffered_deltas {
@@ -686,17 +716,20 @@ impl<T: Transport> Inner<T> {
                     Vec::new()
                 }
                 Message::MissingRequest { from, context, full, .. } => {
-                    if let Some(replica) = &state.replica {
-                        let missing =
-                            if full { Missing::Snapshot(replica.snapshot()) } else { replica.missing_for(&context) };
-                        match missing {
-                            Missing::UpToDate => {}
-                            Missing::Deltas(deltas) => out.extend(self.batches(from, &deltas)),
-                            Missing::Snapshot(snapshot) => out.push((
-                                Channel::Sync,
-                                Message::Snapshot { from: me, to: from, snapshot: Bytes::from(snapshot.encode()) },
-                            )),
+                    let missing = match &state.replica {
+                        Some(replica) if !full => replica.missing_for(&context),
+                        _ => Missing::UpToDate,
+                    };
+                    let snapshot = match missing {
+                        Missing::UpToDate => full.then(|| state.snapshot_bytes()).flatten(),
+                        Missing::Deltas(deltas) => {
+                            out.extend(self.batches(from, &deltas));
+                            None
                         }
+                        Missing::Snapshot(_) => state.snapshot_bytes(),
+                    };
+                    if let Some(snapshot) = snapshot {
+                        out.push((Channel::Sync, Message::Snapshot { from: me, to: from, snapshot }));
                     }
                     Vec::new()
                 }
@@ -723,16 +756,18 @@ impl<T: Transport> Inner<T> {
                 Message::GraphRequest { from, nonce } => {
                     if from == me {
                         self.check_collision(&mut state, nonce, None, "graph request");
-                    } else if let Some(replica) = &state.replica {
-                        out.push((
-                            Channel::Sync,
-                            Message::GraphAnswer {
-                                from: me,
-                                to: from,
-                                nonce,
-                                snapshot: Bytes::from(replica.snapshot().encode()),
-                            },
-                        ));
+                    } else {
+                        let recent = state
+                            .answered
+                            .get(&(from, nonce))
+                            .is_some_and(|at| now.saturating_sub(*at) < ANSWER_HOLD_NS);
+                        if !recent && let Some(snapshot) = state.snapshot_bytes() {
+                            state.answered.retain(|_, at| now.saturating_sub(*at) < ANSWER_HOLD_NS);
+                            if state.answered.len() < MAX_ANSWERED {
+                                state.answered.insert((from, nonce), now);
+                            }
+                            out.push((Channel::Sync, Message::GraphAnswer { from: me, to: from, nonce, snapshot }));
+                        }
                     }
                     Vec::new()
                 }
