@@ -34,6 +34,8 @@ enum Command {
     Agent(commands::agent::AgentArgs),
     /// Measure agents: round-trip time and graph join.
     Bench(commands::bench::BenchArgs),
+    /// Serve a web inspector of the live graph and the BICA debug primitives.
+    Inspect(commands::inspect::InspectArgs),
 }
 
 fn main() -> ExitCode {
@@ -45,6 +47,7 @@ fn main() -> ExitCode {
         Command::Datasets(args) => commands::datasets::run(args),
         Command::Agent(args) => commands::agent::run(args),
         Command::Bench(args) => commands::bench::run(args),
+        Command::Inspect(args) => commands::inspect::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

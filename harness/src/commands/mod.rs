@@ -7,4 +7,5 @@ pub mod bench;
 pub mod check;
 pub mod datasets;
 pub mod graph;
+pub mod inspect;
 pub mod replay;

@@ -1,0 +1,107 @@
+//! `cortex inspect`: joins the graph as an agent over RTPS and serves the web inspector (graph, RT tree, 2-D
+//! world and BICA debug views; edits with `--allow-edit`). Loopback by default; everything the page needs is
+//! inside the binary. `--demo` also runs the camera-detector role on the bundled EuRoC frames in this process, so
+//! the Debug view has a runtime to show.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use agent::{Agent, AgentConfig, AgentId};
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use inspector::debug::DebugSource;
+use inspector::feed::GraphFeed;
+use inspector::{Inspector, InspectorConfig};
+use transport::SystemClock;
+use transport::rtps::{RtpsConfig, RtpsTransport};
+
+/// Arguments of `cortex inspect`.
+#[derive(Debug, Args)]
+pub struct InspectArgs {
+    /// DDS domain id.
+    #[arg(long, default_value_t = 0)]
+    pub domain: u16,
+    /// Topic name prefix (several graphs can share a domain).
+    #[arg(long, default_value = "dsr")]
+    pub topic_prefix: String,
+    /// Where to serve the page.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub listen: SocketAddr,
+    /// Let the page edit the graph (attributes, nodes, edges) through the agent API.
+    #[arg(long)]
+    pub allow_edit: bool,
+    /// The inspector's agent id (0..4096), unique among the running agents.
+    #[arg(long, default_value_t = 4000)]
+    pub id: u32,
+    /// Start from this CORTEX JSON graph if no running agent answers.
+    #[arg(long)]
+    pub seed_json: Option<PathBuf>,
+    /// How long to wait for a running agent's graph before starting alone (or from the seed).
+    #[arg(long, default_value_t = 2000)]
+    pub join_wait_ms: u64,
+    /// Run the camera-detector role on the bundled EuRoC frames in this process (Debug view), mirroring the
+    /// frames into the graph as node `demo_cam0`.
+    #[arg(long)]
+    pub demo: bool,
+    /// Stop by itself after this long (otherwise run until Ctrl-C).
+    #[arg(long)]
+    pub run_for_ms: Option<u64>,
+}
+
+/// Runs `cortex inspect`.
+pub fn run(args: InspectArgs) -> Result<()> {
+    if args.id >= AgentId::LIMIT {
+        bail!("--id {} is out of range (0..{})", args.id, AgentId::LIMIT);
+    }
+    if !args.listen.ip().is_loopback() {
+        eprintln!(
+            "warning: serving the inspector on {} (not loopback): anyone who can reach it sees the graph",
+            args.listen
+        );
+    }
+    let mut config = AgentConfig::new(AgentId(args.id));
+    config.join_wait = Duration::from_millis(args.join_wait_ms);
+    if let Some(path) = &args.seed_json {
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
+    }
+    let rtps = RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() };
+    let transport = RtpsTransport::new(rtps).context("joining the DDS domain")?;
+    let agent = Arc::new(Agent::start(config, transport, Arc::new(SystemClock))?);
+    let feed: Arc<dyn GraphFeed> = agent.clone();
+    let mut demo = None;
+    let mut debug: Option<Arc<dyn DebugSource>> = None;
+    if args.demo {
+        if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(5)) {
+            bail!("the agent did not get a graph in time for --demo");
+        }
+        let (running, source) = inspector::demo::Demo::start(Some(Arc::clone(&feed)))?;
+        demo = Some(running);
+        debug = Some(Arc::new(source));
+    }
+    let title = format!("cortex inspect · domain {} · {}", args.domain, args.topic_prefix);
+    let inspector =
+        Inspector::start(feed, debug, InspectorConfig { listen: args.listen, allow_edit: args.allow_edit, title })?;
+    println!(
+        "inspector on http://{} ({})",
+        inspector.addr(),
+        if args.allow_edit { "edits allowed" } else { "read-only" }
+    );
+
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = Arc::clone(&stop);
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    }
+    let deadline = args.run_for_ms.map(|ms| Instant::now() + Duration::from_millis(ms));
+    while !stop.load(Ordering::SeqCst) && deadline.is_none_or(|d| Instant::now() < d) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    drop(inspector);
+    drop(demo);
+    agent.shutdown();
+    Ok(())
+}
