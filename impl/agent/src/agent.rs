@@ -157,6 +157,9 @@ pub struct AgentStatus {
     pub signals_dropped: u64,
     /// Publishes that failed (the local state is kept; anti-entropy repairs).
     pub publish_failures: u64,
+    /// Times a peer had joined the same operations but showed another graph digest (a replica bug; repaired with
+    /// snapshots). Zero in a correct system.
+    pub digest_mismatches: u64,
     /// Peers heard from, by agent id.
     pub peers: Vec<AgentId>,
     /// Visible nodes.
@@ -234,6 +237,7 @@ struct Inner<T> {
     stop: AtomicBool,
     rejected: AtomicU64,
     signals_dropped: AtomicU64,
+    digest_mismatches: AtomicU64,
     publish_failures: AtomicU64,
 }
 
@@ -294,6 +298,7 @@ impl<T: Transport + 'static> Agent<T> {
             stop: AtomicBool::new(false),
             rejected: AtomicU64::new(0),
             signals_dropped: AtomicU64::new(0),
+            digest_mismatches: AtomicU64::new(0),
             publish_failures: AtomicU64::new(0),
         };
         Ok(Agent { inner: Arc::new(inner), thread: Mutex::new(None) })
@@ -399,6 +404,7 @@ impl<T: Transport + 'static> Agent<T> {
             rejected: self.inner.rejected.load(Ordering::Relaxed),
             signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
+            digest_mismatches: self.inner.digest_mismatches.load(Ordering::Relaxed),
             peers: state.peers.keys().copied().collect(),
             nodes: state.replica.as_ref().map_or(0, Replica::node_count),
             edges: state.replica.as_ref().map_or(0, Replica::edge_count),
@@ -685,8 +691,8 @@ impl<T: Transport> Inner<T> {
                     Some(delta) => self.apply(&mut state, &sample, "delta", vec![delta]),
                     None => Vec::new(),
                 },
-                Message::Announce { from, nonce, replica, context, digest } => {
-                    self.note_incarnations(&mut state, &context);
+                Message::Announce { from, nonce, replica, applied, digest } => {
+                    self.note_incarnations(&mut state, &applied);
                     if from == me {
                         self.check_collision(&mut state, nonce, Some(replica), "announce");
                     }
@@ -695,11 +701,17 @@ impl<T: Transport> Inner<T> {
                     });
                     let ask = match &state.replica {
                         Some(replica) if !asked_recently => {
-                            if !replica.context().includes(&context) {
+                            if !replica.applied().includes(&applied) {
                                 Some(false)
-                            } else if *replica.context() == context {
-                                // Same dots seen, yet another graph: repair with whole states.
-                                (state.digest().map(|d| d.0) != Some(digest)).then_some(true)
+                            } else if *replica.applied() == applied && state.digest().map(|d| d.0) != Some(digest) {
+                                // The same operations joined, yet another graph: a bug in the replica. Say so
+                                // loudly, and repair with whole states.
+                                self.digest_mismatches.fetch_add(1, Ordering::Relaxed);
+                                tracing::error!(
+                                    peer = from.0,
+                                    "same operations joined as the peer but a different graph digest; exchanging snapshots"
+                                );
+                                Some(true)
                             } else {
                                 None
                             }
@@ -709,15 +721,15 @@ impl<T: Transport> Inner<T> {
                     if let (Some(full), Some(replica)) = (ask, &state.replica) {
                         out.push((
                             Channel::Sync,
-                            Message::MissingRequest { from: me, to: from, context: replica.context().clone(), full },
+                            Message::MissingRequest { from: me, to: from, applied: replica.applied().clone(), full },
                         ));
                         state.pending_ask = Some((from, now));
                     }
                     Vec::new()
                 }
-                Message::MissingRequest { from, context, full, .. } => {
+                Message::MissingRequest { from, applied, full, .. } => {
                     let missing = match &state.replica {
-                        Some(replica) if !full => replica.missing_for(&context),
+                        Some(replica) if !full => replica.missing_for(&applied),
                         _ => Missing::UpToDate,
                     };
                     let snapshot = match missing {
@@ -899,7 +911,7 @@ impl<T: Transport> Inner<T> {
                         from: me,
                         nonce: self.nonce,
                         replica: replica.id(),
-                        context: replica.context().clone(),
+                        applied: replica.applied().clone(),
                         digest: digest.0,
                     },
                 ));

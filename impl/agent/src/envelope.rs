@@ -42,9 +42,10 @@ pub enum Message {
         nonce: u64,
         /// The announcer's replica id.
         replica: ReplicaId,
-        /// Everything the announcer has seen.
-        context: CausalContext,
-        /// Digest of the announcer's visible graph: equal contexts with different digests call for a snapshot.
+        /// The operations the announcer has joined (`dsr::Replica::applied`): what anti-entropy compares.
+        applied: CausalContext,
+        /// Digest of the announcer's visible graph. Equal applied sets with different digests would be a bug in the
+        /// replica; the receiver logs it as an error and repairs with whole states.
         digest: [u8; 32],
     },
     /// "Send me what I lack": sent to a peer whose announce showed dots the sender has not seen.
@@ -53,9 +54,9 @@ pub enum Message {
         from: AgentId,
         /// The peer asked.
         to: AgentId,
-        /// The asker's context.
-        context: CausalContext,
-        /// Ask for a whole snapshot, whatever the contexts say (the digests differed).
+        /// The operations the asker has joined.
+        applied: CausalContext,
+        /// Ask for a whole snapshot, whatever the applied sets say (the digests differed).
         full: bool,
     },
     /// Deltas a peer lacked (answer to [`Message::MissingRequest`]).
@@ -266,11 +267,11 @@ impl Message {
                 out.extend_from_slice(delta);
                 out
             }
-            Message::Announce { from, nonce, replica, context, digest } => {
-                put(header(K_ANNOUNCE), &(from.0, nonce, replica.0, WireContext::of(context), digest))
+            Message::Announce { from, nonce, replica, applied, digest } => {
+                put(header(K_ANNOUNCE), &(from.0, nonce, replica.0, WireContext::of(applied), digest))
             }
-            Message::MissingRequest { from, to, context, full } => {
-                put(header(K_MISSING_REQUEST), &(from.0, to.0, WireContext::of(context), full))
+            Message::MissingRequest { from, to, applied, full } => {
+                put(header(K_MISSING_REQUEST), &(from.0, to.0, WireContext::of(applied), full))
             }
             Message::Deltas { from, to, deltas } => {
                 let blocks: Vec<Block<'_>> = deltas.iter().map(|d| Block(d)).collect();
@@ -351,7 +352,7 @@ impl Message {
                     from: AgentId(from),
                     nonce,
                     replica: ReplicaId(replica),
-                    context: context.into_context(name)?,
+                    applied: context.into_context(name)?,
                     digest,
                 }
             }
@@ -362,7 +363,7 @@ impl Message {
                 Message::MissingRequest {
                     from: AgentId(from),
                     to: AgentId(to),
-                    context: context.into_context(name)?,
+                    applied: context.into_context(name)?,
                     full,
                 }
             }
@@ -424,8 +425,8 @@ mod tests {
         let (from, to) = (AgentId(3), AgentId(4));
         vec![
             Message::Delta { from, delta: Bytes::from(d2.encode()) },
-            Message::Announce { from, nonce: 99, replica: ReplicaId(7), context: ctx.clone(), digest: [3; 32] },
-            Message::MissingRequest { from, to, context: ctx, full: true },
+            Message::Announce { from, nonce: 99, replica: ReplicaId(7), applied: ctx.clone(), digest: [3; 32] },
+            Message::MissingRequest { from, to, applied: ctx, full: true },
             Message::Deltas { from, to, deltas: vec![Bytes::from(d1.encode()), Bytes::from(d2.encode())] },
             Message::Snapshot { from, to, snapshot: Bytes::from(replica.snapshot().encode()) },
             Message::GraphRequest { from, nonce: 1 },
