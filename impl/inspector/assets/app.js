@@ -254,7 +254,7 @@ function drawDebug() {
       const tr = el('tr'); const cb = el('input', { type: 'checkbox' }); cb.checked = c.marked;
       cb.onchange = () => post('/api/debug/mark', { component: c.name, on: cb.checked }, $('debug-error'));
       const td = el('td'); td.append(cb);
-      tr.append(td, el('td', { title: c.name }, c.name.split('::').pop()), el('td', {}, c.active ? 'yes' : ''), el('td', {}, c.nominal_hz.toFixed(1)),
+      tr.append(td, el('td', { title: c.name }, c.name.replace(/\b[a-z_0-9]+::/g, '')), el('td', {}, c.active ? 'yes' : ''), el('td', {}, c.nominal_hz.toFixed(1)),
         el('td', {}, c.achieved_hz.toFixed(1)), el('td', {}, c.runs), el('td', {}, c.misses), el('td', {}, c.skipped));
       tb.append(tr);
     }
