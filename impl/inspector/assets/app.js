@@ -211,10 +211,13 @@ function drawWorld() {
   for (const [id, p] of Object.entries(poses)) byRoot.set(p[4], (byRoot.get(p[4]) || 0) + 1);
   const root = [...byRoot.entries()].sort((a, b) => b[1] - a[1])[0]?.[0];
   const ids = Object.keys(poses).filter((id) => poses[id][4] === root);
+  // Top view: the "up" axis is the one along which the poses spread least (CORTEX world graphs are y-up).
+  const spread = [0, 1, 2].map((a) => { const v = ids.map((id) => poses[id][a]); return v.length ? Math.max(...v) - Math.min(...v) : 0; });
+  const up = spread.indexOf(Math.min(...spread)); const [ax, ay] = up === 2 ? [0, 1] : up === 1 ? [0, 2] : [1, 2];
   let minX = Infinity, minY = Infinity, maxX = -Infinity, maxY = -Infinity;
   const grow = (x, y) => { minX = Math.min(minX, x); maxX = Math.max(maxX, x); minY = Math.min(minY, y); maxY = Math.max(maxY, y); };
-  for (const id of ids) grow(poses[id][0], poses[id][1]);
-  for (const [id, pts] of Object.entries(S.world.scans || {})) if (ids.includes(id)) for (const p of pts) grow(p[0], p[1]);
+  for (const id of ids) grow(poses[id][ax], poses[id][ay]);
+  for (const [id, pts] of Object.entries(S.world.scans || {})) if (ids.includes(id)) for (const p of pts) grow(p[ax], p[ay]);
   if (!isFinite(minX)) { $('world-info').textContent = 'no geometric nodes'; return; }
   const pad = 500; minX -= pad; minY -= pad; maxX += pad; maxY += pad;
   const k = Math.min(c.width / (maxX - minX), c.height / (maxY - minY));
@@ -224,23 +227,23 @@ function drawWorld() {
   for (let x = Math.ceil(minX / step) * step; x < maxX; x += step) { g.beginPath(); g.moveTo(X(x), 0); g.lineTo(X(x), c.height); g.stroke(); }
   for (let y = Math.ceil(minY / step) * step; y < maxY; y += step) { g.beginPath(); g.moveTo(0, Y(y)); g.lineTo(c.width, Y(y)); g.stroke(); }
   g.fillStyle = '#2e9e6a';
-  for (const [id, pts] of Object.entries(S.world.scans || {})) if (ids.includes(id)) for (const p of pts) g.fillRect(X(p[0]) - 1, Y(p[1]) - 1, 2, 2);
+  for (const [id, pts] of Object.entries(S.world.scans || {})) if (ids.includes(id)) for (const p of pts) g.fillRect(X(p[ax]) - 1, Y(p[ay]) - 1, 2, 2);
   for (const [id, cov] of Object.entries(S.world.ellipses || {})) {
-    const p = poses[id]; if (!p) continue;
+    const p = poses[id]; if (!p || up !== 2) continue;
     const [a, b, d] = cov; const tr = (a + d) / 2, det = Math.sqrt(Math.max(0, ((a - d) / 2) ** 2 + b * b));
     const l1 = tr + det, l2 = Math.max(0, tr - det), ang = 0.5 * Math.atan2(2 * b, a - d);
     g.strokeStyle = '#c0392b'; g.beginPath(); g.ellipse(X(p[0]), Y(p[1]), Math.max(2, 2 * Math.sqrt(l1) * k), Math.max(2, 2 * Math.sqrt(l2) * k), -ang, 0, 2 * Math.PI); g.stroke();
   }
   g.font = '10px system-ui'; g.textBaseline = 'middle';
   for (const id of ids) {
-    const p = poses[id]; const n = S.nodes.get(id); if (!n) continue; const x = X(p[0]), y = Y(p[1]);
+    const p = poses[id]; const n = S.nodes.get(id); if (!n) continue; const x = X(p[ax]), y = Y(p[ay]);
     if (n.type === 'gaze_target') { g.strokeStyle = '#e0245e'; g.lineWidth = 2; g.beginPath(); g.arc(x, y, 8, 0, 7); g.moveTo(x - 12, y); g.lineTo(x + 12, y); g.moveTo(x, y - 12); g.lineTo(x, y + 12); g.stroke(); g.lineWidth = 1; g.fillStyle = '#e0245e'; g.fillText('attention target', x + 12, y - 10); continue; }
     g.fillStyle = typeColor(n.type); g.strokeStyle = g.fillStyle;
     g.beginPath(); g.arc(x, y, 3.5, 0, 7); g.fill();
-    g.beginPath(); g.moveTo(x, y); g.lineTo(x + 12 * Math.cos(p[3]), y - 12 * Math.sin(p[3])); g.stroke();
+    if (up === 2) { g.beginPath(); g.moveTo(x, y); g.lineTo(x + 12 * Math.cos(p[3]), y - 12 * Math.sin(p[3])); g.stroke(); }
     g.fillStyle = '#1d2330'; g.fillText(n.name, x + 6, y);
   }
-  $('world-info').textContent = ids.length + ' geometric nodes under ' + (S.nodes.get(root)?.name || root) + ' · grid ' + (step / 1000) + ' m';
+  $('world-info').textContent = ids.length + ' geometric nodes under ' + (S.nodes.get(root)?.name || root) + ' · grid ' + (step / 1000) + ' m · plane ' + 'xyz'[ax] + 'xyz'[ay];
 }
 
 // ---- Debug view.

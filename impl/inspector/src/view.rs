@@ -238,7 +238,9 @@ pub fn edge_json(edge: &dsr::EdgeRef<'_>) -> Json {
 }
 
 /// The top view of the geometric nodes: per node `[x, y, z, yaw]` (mm, rad) in its RT root's frame and the root,
-/// laser scans as points and detections' covariance ellipses (`[xx, xy, yy]`, mm²) in the same frame.
+/// laser scans as `[x, y, z]` points and detections' covariance ellipses (`[xx, xy, yy]`, mm², in the x-y plane)
+/// in the same frame. The page draws the plane of the two axes along which the poses spread most (CORTEX
+/// world graphs are y-up, newer ones z-up).
 pub fn world_json(replica: &Replica) -> Json {
     let mut poses = Map::new();
     let mut scans = Map::new();
@@ -264,7 +266,7 @@ pub fn world_json(replica: &Replica) -> Json {
                 .map(|i| {
                     let (d, a) = (f64::from(dists[i]), f64::from(angles[i]));
                     let p = pose * point(d * a.cos(), d * a.sin());
-                    json!([float(p[0].round()), float(p[1].round())])
+                    json!([float(p[0].round()), float(p[1].round()), float(p[2].round())])
                 })
                 .collect();
             scans.insert(id.0.to_string(), Json::Array(points));
@@ -469,6 +471,6 @@ mod tests {
         assert_eq!(pose[0].as_f64(), Some(500.0));
         assert!((pose[3].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
         // A beam straight ahead of a laser turned 90° lands 1 m to the world's +y.
-        assert_eq!(w["scans"][laser.0.to_string()], json!([[500.0, 1000.0]]));
+        assert_eq!(w["scans"][laser.0.to_string()], json!([[500.0, 1000.0, 0.0]]));
     }
 }
