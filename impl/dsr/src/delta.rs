@@ -372,16 +372,18 @@ fn limit(place: impl Into<String>, what: impl Into<String>) -> DeltaError {
     DeltaError::Limit { place: place.into(), what: what.into() }
 }
 
-fn check_len(place: &str, len: usize) -> Result<(), DeltaError> {
+/// Checks a list length; the place is only formatted when the check fails (decoding is a hot path).
+fn check_len<P: AsRef<str>>(place: impl FnOnce() -> P, len: usize) -> Result<(), DeltaError> {
     if len > MAX_ITEMS {
-        return Err(limit(place, format!("{len} items (limit {MAX_ITEMS})")));
+        return Err(limit(place().as_ref(), format!("{len} items (limit {MAX_ITEMS})")));
     }
     Ok(())
 }
 
-fn check_type_name(place: &str, what: &str, name: &str) -> Result<(), DeltaError> {
+/// Checks a name's length; the place is only formatted when the check fails.
+fn check_type_name(place: impl FnOnce() -> String, what: &str, name: &str) -> Result<(), DeltaError> {
     if name.is_empty() || name.len() > crate::dictionary::MAX_NAME_LEN {
-        return Err(limit(place, format!("{what} of {} bytes (1 to 255 allowed)", name.len())));
+        return Err(limit(place(), format!("{what} of {} bytes (1 to 255 allowed)", name.len())));
     }
     Ok(())
 }
@@ -437,7 +439,7 @@ impl Decoder {
     }
 
     fn entries<T>(&self, entries: Vec<WireEntry<T>>, place: &dyn Fn() -> String) -> Result<Register<T>, DeltaError> {
-        check_len(&place(), entries.len())?;
+        check_len(place, entries.len())?;
         let mut values: SmallVec<[Entry<T>; 1]> = SmallVec::with_capacity(entries.len());
         for (index, entry) in entries.into_iter().enumerate() {
             let entry_place = || format!("{} value {index}", place());
@@ -452,18 +454,20 @@ impl Decoder {
     }
 
     fn attrs(&self, registers: Vec<WireRegister<'_>>, owner: &dyn Fn() -> String) -> Result<Attrs, DeltaError> {
-        check_len(&owner(), registers.len())?;
+        check_len(owner, registers.len())?;
         let mut attrs = Attrs::new();
         for register in registers {
             let name = match register.name {
-                WireName::Builtin(code) => Dictionary::builtin_attr_name(code)
+                WireName::Builtin(code) => crate::dictionary::interned_attr(code)
                     .ok_or_else(|| invalid(owner(), format!("unknown built-in attribute code {code}")))?,
-                WireName::Text(text) => text,
+                WireName::Text(text) => {
+                    check_type_name(|| format!("{} attribute {text:?}", owner()), "attribute name", text)?;
+                    Name::new(text)
+                }
             };
             let place = || format!("{} attribute {name:?}", owner());
-            check_type_name(&place(), "attribute name", name)?;
             let values = self.entries(register.values, &place)?;
-            if attrs.insert(Name::new(name), values).is_some() {
+            if attrs.insert(name.clone(), values).is_some() {
                 return Err(limit(place(), "attribute listed twice"));
             }
         }
@@ -477,12 +481,12 @@ impl Decoder {
         }
         let owner = || format!("node {id}");
         let mut core = Register::default();
-        check_len(&owner(), node.core.len())?;
+        check_len(owner, node.core.len())?;
         for (index, entry) in node.core.into_iter().enumerate() {
             let place = || format!("node {id} core value {index}");
             let dot = self.stored_dot(entry.dot, &place)?;
             let (node_type, name) = entry.value;
-            check_type_name(&place(), "node type", node_type)?;
+            check_type_name(place, "node type", node_type)?;
             if !crate::replica::valid_node_name(name) {
                 return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
             }
@@ -492,7 +496,7 @@ impl Decoder {
             core.values.push(Entry {
                 dot,
                 stamp: Stamp(u64::from_le_bytes(entry.stamp)),
-                value: NodeCore { node_type: Name::new(node_type), name: Name::new(name) },
+                value: NodeCore { node_type: crate::dictionary::intern_type(node_type), name: Name::new(name) },
             });
         }
         core.values.sort_unstable_by_key(|entry| entry.dot);
@@ -501,12 +505,16 @@ impl Decoder {
     }
 
     fn edge(&self, edge: WireEdge<'_>) -> Result<(EdgeKey, EdgeEntry), DeltaError> {
-        let place = format!("edge {}->{}", edge.from, edge.to);
+        let place = || format!("edge {}->{}", edge.from, edge.to);
         if edge.from == 0 || edge.to == 0 {
-            return Err(invalid(place, "node id 0"));
+            return Err(invalid(place(), "node id 0"));
         }
-        check_type_name(&place, "edge type", edge.edge_type)?;
-        let key = EdgeKey::new(NodeId(edge.from), NodeId(edge.to), edge.edge_type);
+        check_type_name(place, "edge type", edge.edge_type)?;
+        let key = EdgeKey {
+            from: NodeId(edge.from),
+            to: NodeId(edge.to),
+            edge_type: crate::dictionary::intern_type(edge.edge_type),
+        };
         let owner = || format!("edge {key}");
         let presence = self.entries(edge.presence, &|| format!("edge {key} presence"))?;
         let attrs = self.attrs(edge.attrs, &owner)?;
@@ -522,7 +530,7 @@ fn from_wire(
 ) -> Result<Delta, DeltaError> {
     let origin = Decoder::origin(wire.origin)?;
     let mut decoder = Decoder { origin, ctx: CausalContext::default() };
-    check_len("context", wire.vv.len().saturating_add(wire.cloud.len()))?;
+    check_len(|| "context", wire.vv.len().saturating_add(wire.cloud.len()))?;
     let mut vv = Vec::with_capacity(wire.vv.len());
     for (replica, counter) in &wire.vv {
         if *replica == 0 {
@@ -542,21 +550,21 @@ fn from_wire(
     }
 
     let mut store = Store::default();
-    check_len("tombstones", wire.tombstones.len())?;
+    check_len(|| "tombstones", wire.tombstones.len())?;
     for id in &wire.tombstones {
         if *id == 0 {
             return Err(invalid("tombstones", "node id 0"));
         }
         store.tombstones.insert(NodeId(*id));
     }
-    check_len("nodes", wire.nodes.len())?;
+    check_len(|| "nodes", wire.nodes.len())?;
     for node in wire.nodes {
         let (id, entry) = decoder.node(node)?;
         if store.nodes.insert(id, entry).is_some() {
             return Err(limit(format!("node {id}"), "node listed twice"));
         }
     }
-    check_len("edges", wire.edges.len())?;
+    check_len(|| "edges", wire.edges.len())?;
     for edge in wire.edges {
         let (key, entry) = decoder.edge(edge)?;
         if store.edges.contains_key(&key) {
@@ -567,7 +575,7 @@ fn from_wire(
     let applied = match applied {
         None => CausalContext::default(),
         Some((vv, cloud)) => {
-            check_len("applied operations", vv.len().saturating_add(cloud.len()))?;
+            check_len(|| "applied operations", vv.len().saturating_add(cloud.len()))?;
             if vv.iter().chain(&cloud).any(|(replica, _)| *replica == 0) {
                 return Err(invalid("applied operations", "replica id 0"));
             }

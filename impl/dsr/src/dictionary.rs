@@ -424,11 +424,27 @@ impl Dictionary {
     pub(crate) fn builtin_attr_code(name: &str) -> Option<u16> {
         BUILTIN_ATTRIBUTES.iter().position(|(known, _)| *known == name).map(|index| index as u16)
     }
+}
 
-    /// The built-in attribute name of a wire code.
-    pub(crate) fn builtin_attr_name(code: u16) -> Option<&'static str> {
-        BUILTIN_ATTRIBUTES.get(usize::from(code)).map(|(name, _)| *name)
-    }
+/// Shared copies of the built-in names, so decoding a delta does not allocate a string per built-in name it meets.
+struct Interned {
+    attrs: Vec<Name>,
+    types: HashMap<&'static str, Name>,
+}
+
+static INTERNED: std::sync::LazyLock<Interned> = std::sync::LazyLock::new(|| Interned {
+    attrs: BUILTIN_ATTRIBUTES.iter().map(|(name, _)| Name::new(name)).collect(),
+    types: BUILTIN_NODE_TYPES.iter().chain(BUILTIN_EDGE_TYPES).map(|name| (*name, Name::new(name))).collect(),
+});
+
+/// The shared name of a built-in attribute's wire code.
+pub(crate) fn interned_attr(code: u16) -> Option<Name> {
+    INTERNED.attrs.get(usize::from(code)).cloned()
+}
+
+/// The shared name of a built-in node or edge type, or a new name for any other text.
+pub(crate) fn intern_type(text: &str) -> Name {
+    INTERNED.types.get(text).cloned().unwrap_or_else(|| Name::new(text))
 }
 
 /// The longest name accepted, in bytes.
