@@ -52,3 +52,41 @@ fn every_mutant_is_killed_from_the_command_line() {
     let results: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON results");
     assert!(results.as_array().unwrap().iter().all(|r| r["killed"] == true));
 }
+
+#[test]
+fn explorer_serves_the_model_and_a_busy_address_is_an_error() {
+    use std::io::{Read, Write};
+    use std::net::{TcpListener, TcpStream};
+    use std::time::{Duration, Instant};
+
+    // A busy address: a clear error, not Stateright's panic.
+    let busy = TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = busy.local_addr().unwrap().to_string();
+    let out = cortex(&["check", "scheduler", "--explore", &address]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot listen"), "{}", String::from_utf8_lossy(&out.stderr));
+    drop(busy);
+
+    // A free address: the Explorer answers over HTTP.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cortex"))
+        .args(["check", "scheduler", "--explore", &address])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let response = loop {
+        if let Ok(mut stream) = TcpStream::connect(&address) {
+            stream.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+            stream.write_all(b"GET /.states HTTP/1.0\r\n\r\n").unwrap();
+            let mut response = String::new();
+            let _ = stream.read_to_string(&mut response);
+            break response;
+        }
+        assert!(Instant::now() < deadline, "the Explorer never listened on {address}");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    child.kill().unwrap();
+    let _ = child.wait();
+    assert!(response.starts_with("HTTP/1.1 200") || response.starts_with("HTTP/1.0 200"), "{response}");
+    assert!(response.contains("planner"), "the initial state names the model's components: {response}");
+}
