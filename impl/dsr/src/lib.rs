@@ -109,8 +109,8 @@ pub use ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
 pub use kinematics::KinematicsError;
 pub use mutants::DsrMutant;
 pub use replica::{
-    Change, ChangeEvent, Digest, EdgeRef, LogLimits, Missing, NewNode, NodeRef, Replica, VisibleAttr, VisibleGraph,
-    VisibleNode,
+    Attributes, Change, ChangeEvent, Digest, EdgeRef, LogLimits, Missing, NewNode, NodeRef, Replica, VisibleAttr,
+    VisibleGraph, VisibleNode,
 };
 pub use value::{AttrType, Value, ValueType};
 

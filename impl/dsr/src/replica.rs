@@ -1380,30 +1380,34 @@ impl<'a> NodeRef<'a> {
         self.core.stamp
     }
 
+    /// The node's attributes.
+    pub fn attributes(&self) -> Attributes<'a> {
+        Attributes { attrs: &self.entry.attrs, plant: self.replica.plant }
+    }
+
     /// The winning value of an attribute.
     pub fn attr(&self, name: &str) -> Option<&'a Value> {
-        self.attr_entry(name).map(|entry| &entry.value)
+        self.attributes().attr(name)
     }
 
     /// The winning value of an attribute with its stamp and writer.
     pub fn attr_entry(&self, name: &str) -> Option<&'a Entry<Value>> {
-        self.entry.attrs.get(name)?.winner_planted(self.replica.plant)
+        self.attributes().attr_entry(name)
     }
 
     /// Every concurrent value of an attribute (empty if absent).
     pub fn concurrent(&self, name: &str) -> &'a [Entry<Value>] {
-        self.entry.attrs.get(name).map_or(&[], |register| register.entries())
+        self.attributes().concurrent(name)
     }
 
-    /// A typed attribute value (`None` if absent).
+    /// A typed attribute value (`None` if absent or of another type).
     pub fn get<T: AttrType>(&self, key: AttrKey<T>) -> Option<T> {
-        self.attr(key.name()).and_then(T::from_value)
+        self.attributes().get(key)
     }
 
     /// Every attribute with its winning value, in name order.
     pub fn attrs(&self) -> impl Iterator<Item = (&'a Name, &'a Value)> + 'a {
-        let plant = self.replica.plant;
-        self.entry.attrs.iter().filter_map(move |(name, register)| Some((name, &register.winner_planted(plant)?.value)))
+        self.attributes().winners()
     }
 }
 
@@ -1446,6 +1450,51 @@ impl<'a> EdgeRef<'a> {
         &self.key.edge_type
     }
 
+    /// The edge's attributes.
+    pub fn attributes(&self) -> Attributes<'a> {
+        Attributes { attrs: &self.entry.attrs, plant: self.replica.plant }
+    }
+
+    /// The winning value of an attribute.
+    pub fn attr(&self, name: &str) -> Option<&'a Value> {
+        self.attributes().attr(name)
+    }
+
+    /// The winning value of an attribute with its stamp and writer.
+    pub fn attr_entry(&self, name: &str) -> Option<&'a Entry<Value>> {
+        self.attributes().attr_entry(name)
+    }
+
+    /// Every concurrent value of an attribute (empty if absent).
+    pub fn concurrent(&self, name: &str) -> &'a [Entry<Value>] {
+        self.attributes().concurrent(name)
+    }
+
+    /// A typed attribute value (`None` if absent or of another type).
+    pub fn get<T: AttrType>(&self, key: AttrKey<T>) -> Option<T> {
+        self.attributes().get(key)
+    }
+
+    /// Every attribute with its winning value, in name order.
+    pub fn attrs(&self) -> impl Iterator<Item = (&'a Name, &'a Value)> + 'a {
+        self.attributes().winners()
+    }
+}
+
+impl std::fmt::Debug for EdgeRef<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Edge({})", self.key)
+    }
+}
+
+/// A read-only view of one element's attributes (what [`NodeRef`] and [`EdgeRef`] share).
+#[derive(Clone, Copy)]
+pub struct Attributes<'a> {
+    attrs: &'a Attrs,
+    plant: Plant,
+}
+
+impl<'a> Attributes<'a> {
     /// The winning value of an attribute.
     pub fn attr(&self, name: &str) -> Option<&'a Value> {
         self.attr_entry(name).map(|entry| &entry.value)
@@ -1453,28 +1502,32 @@ impl<'a> EdgeRef<'a> {
 
     /// The winning value of an attribute with its stamp and writer.
     pub fn attr_entry(&self, name: &str) -> Option<&'a Entry<Value>> {
-        self.entry.attrs.get(name)?.winner_planted(self.replica.plant)
+        self.attrs.get(name)?.winner_planted(self.plant)
     }
 
     /// Every concurrent value of an attribute (empty if absent).
     pub fn concurrent(&self, name: &str) -> &'a [Entry<Value>] {
-        self.entry.attrs.get(name).map_or(&[], |register| register.entries())
+        self.attrs.get(name).map_or(&[], |register| register.entries())
     }
 
-    /// A typed attribute value.
+    /// A typed attribute value (`None` if absent or of another type).
     pub fn get<T: AttrType>(&self, key: AttrKey<T>) -> Option<T> {
         self.attr(key.name()).and_then(T::from_value)
     }
 
     /// Every attribute with its winning value, in name order.
-    pub fn attrs(&self) -> impl Iterator<Item = (&'a Name, &'a Value)> + 'a {
-        let plant = self.replica.plant;
-        self.entry.attrs.iter().filter_map(move |(name, register)| Some((name, &register.winner_planted(plant)?.value)))
+    pub fn winners(self) -> impl Iterator<Item = (&'a Name, &'a Value)> + 'a {
+        let plant = self.plant;
+        self.attrs.iter().filter_map(move |(name, register)| Some((name, &register.winner_planted(plant)?.value)))
     }
-}
 
-impl std::fmt::Debug for EdgeRef<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Edge({})", self.key)
+    /// Number of attributes.
+    pub fn len(&self) -> usize {
+        self.attrs.len()
+    }
+
+    /// Whether there is no attribute.
+    pub fn is_empty(&self) -> bool {
+        self.attrs.is_empty()
     }
 }

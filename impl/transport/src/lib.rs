@@ -204,6 +204,17 @@ impl Counters {
         self.payload_bytes_received.fetch_add(payload as u64, Ordering::Relaxed);
     }
 
+    /// Takes a sample from an inbox (waiting up to `timeout`, or not at all), counting it: the receive path every
+    /// transport shares.
+    pub fn take(&self, inbox: &crossbeam_channel::Receiver<Sample>, timeout: Option<Duration>) -> Option<Sample> {
+        let sample = match timeout {
+            None => inbox.try_recv().ok()?,
+            Some(timeout) => inbox.recv_timeout(timeout).ok()?,
+        };
+        self.received(sample.bytes.len());
+        Some(sample)
+    }
+
     /// Counts one sample dropped at a full queue.
     pub fn dropped_full(&self) {
         self.dropped_full.fetch_add(1, Ordering::Relaxed);

@@ -381,15 +381,11 @@ impl Transport for RtpsTransport {
     }
 
     fn try_recv(&self) -> Option<Sample> {
-        let sample = self.inbox.try_recv().ok()?;
-        self.counters.received(sample.bytes.len());
-        Some(sample)
+        self.counters.take(&self.inbox, None)
     }
 
     fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
-        let sample = self.inbox.recv_timeout(timeout).ok()?;
-        self.counters.received(sample.bytes.len());
-        Some(sample)
+        self.counters.take(&self.inbox, Some(timeout))
     }
 
     fn stats(&self) -> TransportStats {
