@@ -22,6 +22,7 @@ use dsr::{
 use transport::{Channel, Clock, Sample, Transport, TransportError, TransportStats};
 
 use crate::AgentId;
+use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
 use crate::envelope::Message;
 
 /// Settings of an agent.
@@ -46,6 +47,10 @@ pub struct AgentConfig {
     pub seed: Option<CortexGraph>,
     /// This life's nonce; `None` draws a random one (set it only in deterministic simulations).
     pub nonce: Option<u64>,
+    /// Most remote calls of this agent waiting for replies at once.
+    pub max_calls_in_flight: usize,
+    /// Most call replies of this agent's server waiting to be published.
+    pub call_reply_outbox: usize,
 }
 
 impl AgentConfig {
@@ -61,6 +66,8 @@ impl AgentConfig {
             max_batch_bytes: 256 << 10,
             seed: None,
             nonce: None,
+            max_calls_in_flight: 64,
+            call_reply_outbox: 256,
         }
     }
 }
@@ -160,6 +167,14 @@ pub struct AgentStatus {
     /// Times a peer had joined the same operations but showed another graph digest (a replica bug; repaired with
     /// snapshots). Zero in a correct system.
     pub digest_mismatches: u64,
+    /// Call requests addressed to this agent (served, or answered with a fault).
+    pub calls_served: u64,
+    /// Call replies of this agent's server dropped because the reply outbox was full.
+    pub call_replies_dropped: u64,
+    /// Replies to this agent's calls that came after the caller gave up (or from another agent).
+    pub late_call_replies: u64,
+    /// This agent's calls waiting for replies now.
+    pub calls_in_flight: usize,
     /// Peers heard from, by agent id.
     pub peers: Vec<AgentId>,
     /// Visible nodes.
@@ -239,12 +254,14 @@ struct Inner<T> {
     signals_dropped: AtomicU64,
     digest_mismatches: AtomicU64,
     publish_failures: AtomicU64,
+    calls: Arc<CallTable>,
+    service: CallService,
 }
 
 /// A DSR_d agent. Thread-safe: share it by reference or in an `Arc`.
 pub struct Agent<T: Transport + 'static> {
     inner: Arc<Inner<T>>,
-    thread: Mutex<Option<JoinHandle<()>>>,
+    threads: Mutex<Vec<JoinHandle<()>>>,
 }
 
 impl<T: Transport + 'static> std::fmt::Debug for Agent<T> {
@@ -289,7 +306,6 @@ impl<T: Transport + 'static> Agent<T> {
             answered: BTreeMap::new(),
         };
         let inner = Inner {
-            config,
             nonce,
             transport,
             clock,
@@ -300,8 +316,11 @@ impl<T: Transport + 'static> Agent<T> {
             signals_dropped: AtomicU64::new(0),
             digest_mismatches: AtomicU64::new(0),
             publish_failures: AtomicU64::new(0),
+            calls: Arc::new(CallTable::new(config.max_calls_in_flight, nonce)),
+            service: CallService::new(config.call_reply_outbox),
+            config,
         };
-        Ok(Agent { inner: Arc::new(inner), thread: Mutex::new(None) })
+        Ok(Agent { inner: Arc::new(inner), threads: Mutex::new(Vec::new()) })
     }
 
     /// An agent with its own receiving thread, which handles samples as they arrive and does the periodic work.
@@ -328,7 +347,20 @@ impl<T: Transport + 'static> Agent<T> {
                 }
             })
             .map_err(|e| AgentError::Thread { agent: agent.inner.config.id, detail: e.to_string() })?;
-        *agent.thread.lock().unwrap_or_else(|p| p.into_inner()) = Some(handle);
+        agent.threads.lock().unwrap_or_else(|p| p.into_inner()).push(handle);
+        // Publishes the call replies of this agent's server as they come (the server never does I/O itself).
+        let inner = Arc::clone(&agent.inner);
+        let handle = std::thread::Builder::new()
+            .name(format!("agent-{}-replies", agent.inner.config.id.0))
+            .spawn(move || {
+                while !inner.stop.load(Ordering::Relaxed) {
+                    if let Ok(reply) = inner.service.outbox_rx.recv_timeout(tick) {
+                        inner.send(vec![(Channel::Calls, reply)]);
+                    }
+                }
+            })
+            .map_err(|e| AgentError::Thread { agent: agent.inner.config.id, detail: e.to_string() })?;
+        agent.threads.lock().unwrap_or_else(|p| p.into_inner()).push(handle);
         Ok(agent)
     }
 
@@ -341,7 +373,18 @@ impl<T: Transport + 'static> Agent<T> {
             handled += 1;
         }
         self.inner.tick();
+        self.flush_call_replies();
         handled
+    }
+
+    /// Publishes the call replies this agent's server has produced so far (the threaded agent does this on its
+    /// own; an agent driven by hand does it in [`Agent::pump`]). Returns how many.
+    pub fn flush_call_replies(&self) -> usize {
+        let replies: Vec<(Channel, Message)> =
+            self.inner.service.outbox_rx.try_iter().map(|reply| (Channel::Calls, reply)).collect();
+        let n = replies.len();
+        self.inner.send(replies);
+        n
     }
 
     /// Waits (up to `timeout`) until the agent has its graph; returns whether it has.
@@ -361,7 +404,8 @@ impl<T: Transport + 'static> Agent<T> {
     /// Stops the receiving thread (if any) and waits for it.
     pub fn shutdown(&self) {
         self.inner.stop.store(true, Ordering::SeqCst);
-        if let Some(handle) = self.thread.lock().unwrap_or_else(|p| p.into_inner()).take() {
+        let handles = std::mem::take(&mut *self.threads.lock().unwrap_or_else(|p| p.into_inner()));
+        for handle in handles {
             let _ = handle.join();
         }
     }
@@ -405,6 +449,10 @@ impl<T: Transport + 'static> Agent<T> {
             signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
             digest_mismatches: self.inner.digest_mismatches.load(Ordering::Relaxed),
+            calls_served: self.inner.service.served.load(Ordering::Relaxed),
+            call_replies_dropped: self.inner.service.dropped.load(Ordering::Relaxed),
+            late_call_replies: self.inner.calls.late.load(Ordering::Relaxed),
+            calls_in_flight: self.inner.calls.in_flight(),
             peers: state.peers.keys().copied().collect(),
             nodes: state.replica.as_ref().map_or(0, Replica::node_count),
             edges: state.replica.as_ref().map_or(0, Replica::edge_count),
@@ -457,6 +505,14 @@ impl<T: Transport + 'static> Agent<T> {
         &self,
         op: impl FnOnce(&mut Replica, u64) -> Result<(R, Arc<Delta>), OpError>,
     ) -> Result<R, AgentError> {
+        self.write_deltas(|r, now| op(r, now).map(|(result, delta)| (result, vec![delta])))
+    }
+
+    /// A local operation that makes several deltas (each is published).
+    fn write_deltas<R>(
+        &self,
+        op: impl FnOnce(&mut Replica, u64) -> Result<(R, Vec<Arc<Delta>>), OpError>,
+    ) -> Result<R, AgentError> {
         let agent = self.inner.config.id;
         let now = self.inner.clock.now_ns();
         let (result, delta, changes) = {
@@ -468,8 +524,11 @@ impl<T: Transport + 'static> Agent<T> {
             let (result, delta) = op(replica, now).map_err(|source| AgentError::Op { agent, source })?;
             (result, delta, replica.drain_changes())
         };
-        let message = Message::Delta { from: agent, delta: Bytes::from(delta.encode()) };
-        self.inner.send(vec![(Channel::Updates, message)]);
+        let messages = delta
+            .iter()
+            .map(|delta| (Channel::Updates, Message::Delta { from: agent, delta: Bytes::from(delta.encode()) }))
+            .collect();
+        self.inner.send(messages);
         self.inner.signal(changes);
         Ok(result)
     }
@@ -543,6 +602,81 @@ impl<T: Transport + 'static> Agent<T> {
     /// As [`Agent::insert_node`].
     pub fn remove_attr(&self, element: impl Into<Element>, name: &str) -> Result<(), AgentError> {
         self.write(|r, now| r.remove_attr(now, element, name).map(|d| ((), d)))
+    }
+
+    /// Places `child` under `parent` with an RT edge (inserting or moving it): translation in mm, Euler x y z in
+    /// rad (`dsr::Replica::set_rt`; its deltas are published in order).
+    ///
+    /// # Errors
+    /// As [`Agent::insert_node`].
+    pub fn set_rt(
+        &self,
+        parent: NodeId,
+        child: NodeId,
+        translation_mm: [f32; 3],
+        euler_xyz_rad: [f32; 3],
+    ) -> Result<(), AgentError> {
+        self.write_deltas(|r, now| r.set_rt(now, parent, child, translation_mm, euler_xyz_rad).map(|d| ((), d)))
+    }
+
+    // -------------------------------------------------------------------------------------------------------
+    // Remote calls (see `crate::calls`).
+
+    /// Serves the calls addressed to this agent with `server` from now on (replacing an earlier one).
+    pub fn serve_calls(&self, server: Arc<dyn CallServer>) {
+        *self.inner.service.server.lock().unwrap_or_else(|p| p.into_inner()) = Some(server);
+    }
+
+    /// Stops serving calls: later requests are answered [`crate::CallFault::NoRuntime`].
+    pub fn stop_serving_calls(&self) {
+        *self.inner.service.server.lock().unwrap_or_else(|p| p.into_inner()) = None;
+    }
+
+    /// Sends a call of `method` with the request bytes `args` to agent `to`; does not wait.
+    ///
+    /// # Errors
+    /// [`CallError::TooManyInFlight`], or [`CallError::Send`] when the transport refuses the request.
+    pub fn call_start(&self, to: AgentId, method: &str, args: Bytes) -> Result<PendingCall, CallError> {
+        let (call, receiver) = self.inner.calls.open(to, method)?;
+        let pending =
+            PendingCall { table: Arc::clone(&self.inner.calls), call, to, method: method.to_owned(), receiver };
+        let message = Message::CallRequest { from: self.id(), to, call, method: method.to_owned(), args };
+        self.inner.transport.publish(Channel::Calls, message.encode()).map_err(|e| CallError::Send {
+            to,
+            method: method.to_owned(),
+            detail: e.to_string(),
+        })?;
+        Ok(pending)
+    }
+
+    /// Calls `method` of agent `to` with raw request bytes and waits up to `timeout` for the response bytes.
+    ///
+    /// # Errors
+    /// [`CallError`]: the server's fault, a timeout, too many calls in flight, a send failure.
+    pub fn call_bytes(&self, to: AgentId, method: &str, args: Bytes, timeout: Duration) -> Result<Bytes, CallError> {
+        self.call_start(to, method, args)?.wait(timeout)
+    }
+
+    /// Calls `method` of agent `to` with a typed request (`postcard`-encoded) and waits up to `timeout` for the
+    /// typed response.
+    ///
+    /// # Errors
+    /// As [`Agent::call_bytes`], and [`CallError::Codec`] when the request does not encode or the response is not
+    /// an `R`.
+    pub fn call<Q: serde::Serialize, R: serde::de::DeserializeOwned>(
+        &self,
+        to: AgentId,
+        method: &str,
+        request: &Q,
+        timeout: Duration,
+    ) -> Result<R, CallError> {
+        let args = postcard::to_allocvec(request).map_err(|e| CallError::Codec {
+            to,
+            method: method.to_owned(),
+            detail: format!("encoding the request: {e}"),
+        })?;
+        let bytes = self.call_bytes(to, method, Bytes::from(args), timeout)?;
+        crate::calls::decode_response(to, method, &bytes)
     }
 }
 
@@ -682,6 +816,18 @@ impl<T: Transport> Inner<T> {
         }
         let me = self.me();
         let now = self.clock.now_ns();
+        // Calls never touch the replica: route them without holding the state lock across the server.
+        let message = match message {
+            Message::CallRequest { from, call, method, args, .. } => {
+                self.lock().peers.insert(from, now);
+                return self.service.request(me, from, call, &method, args);
+            }
+            Message::CallReply { from, call, result, .. } => {
+                self.lock().peers.insert(from, now);
+                return self.calls.deliver(from, call, result);
+            }
+            other => other,
+        };
         let mut out = Vec::new();
         let changes = {
             let mut state = self.lock();
@@ -793,19 +939,8 @@ impl<T: Transport> Inner<T> {
                         }
                     }
                 }
-                Message::CallRequest { from, call, .. } => {
-                    out.push((
-                        Channel::Calls,
-                        Message::CallReply {
-                            from: me,
-                            to: from,
-                            call,
-                            result: Err(format!("{me} serves no remote calls")),
-                        },
-                    ));
-                    Vec::new()
-                }
-                Message::CallReply { .. } => Vec::new(),
+                // Routed above.
+                Message::CallRequest { .. } | Message::CallReply { .. } => Vec::new(),
             }
         };
         self.send(out);

@@ -6,12 +6,16 @@
 //! plus 4 or 5. **Decoding never panics**: foreign bytes, an unknown version or kind, truncated or trailing bytes,
 //! and lists over the limits are [`EnvelopeError`]s that say which kind and what; payload slices share the
 //! sample's buffer. Deltas inside are decoded (and checked) by the agent with `dsr::Delta::decode`.
+//!
+//! A call request is `(from, to, call id, method name, request bytes)` and its reply `(from, to, call id,
+//! Ok(response bytes) | Err(CallFault))`, the bytes being the method's `postcard` encoding (see [`crate::calls`]).
 
 use bytes::Bytes;
 use dsr::{CausalContext, Dot, ReplicaId};
 use serde::{Deserialize, Serialize};
 
 use crate::AgentId;
+use crate::calls::CallFault;
 
 /// First byte of every envelope: a foreign sample on our topics is recognised at once.
 pub const MAGIC: u8 = 0xD5;
@@ -116,8 +120,8 @@ pub enum Message {
         to: AgentId,
         /// The request's id.
         call: u64,
-        /// Result bytes, or an error message.
-        result: Result<Bytes, String>,
+        /// Response bytes, or why there is no response.
+        result: Result<Bytes, CallFault>,
     },
 }
 
@@ -292,7 +296,7 @@ impl Message {
                 put(header(K_CALL_REQUEST), &(from.0, to.0, call, method, Block(args)))
             }
             Message::CallReply { from, to, call, result } => {
-                let result = result.as_ref().map(|b| Block(b));
+                let result: Result<Block<'_>, &CallFault> = result.as_ref().map(|b| Block(b));
                 put(header(K_CALL_REPLY), &(from.0, to.0, call, result))
             }
         };
@@ -402,7 +406,7 @@ impl Message {
                 Message::CallRequest { from: AgentId(from), to: AgentId(to), call, method, args: tail(args) }
             }
             _ => {
-                type Reply<'b> = (u32, u32, u64, Result<&'b [u8], String>);
+                type Reply<'b> = (u32, u32, u64, Result<&'b [u8], CallFault>);
                 let ((from, to, call, result), rest): (Reply<'_>, _) = postcard::take_from_bytes(body).map_err(take)?;
                 whole(rest)?;
                 Message::CallReply { from: AgentId(from), to: AgentId(to), call, result: result.map(tail) }
@@ -439,7 +443,7 @@ mod tests {
                 args: Bytes::from_static(b"1.5"),
             },
             Message::CallReply { from, to, call: 8, result: Ok(Bytes::from_static(b"ok")) },
-            Message::CallReply { from, to, call: 9, result: Err("no such method".into()) },
+            Message::CallReply { from, to, call: 9, result: Err(CallFault::UnknownMethod("no such method".into())) },
         ]
     }
 

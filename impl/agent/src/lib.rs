@@ -29,15 +29,21 @@
 //! `Replica::missing_for` — the retained deltas, or a snapshot when its bounded history does not cover the gap. So
 //! the graph converges after loss, a healed partition and a restart.
 //!
+//! **Remote calls.** [`Agent::call`] calls a named method of another agent's BICA runtime (request/reply on
+//! [`transport::Channel::Calls`], typed with serde, bounded in flight, with a timeout); an agent serves them once
+//! [`Agent::serve_calls`] attached a [`CallServer`] such as `bica::service::Service`. See [`calls`].
+//!
 //! **Bad input.** A foreign or malformed sample, or a delta the replica refuses, is logged with its origin and
 //! dropped; the replica is unchanged and the agent keeps running ([`AgentStatus::rejected`] counts them).
 
 use std::fmt;
 
 pub mod agent;
+pub mod calls;
 pub mod envelope;
 
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, ChangeSignal};
+pub use calls::{CallError, CallFault, CallReplier, CallServer, PendingCall};
 
 /// A CORTEX agent id (12 bits: 0..4096).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]

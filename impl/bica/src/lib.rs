@@ -74,6 +74,7 @@ pub mod error;
 pub mod fsm;
 pub mod remote;
 pub mod runtime;
+pub mod service;
 pub mod stats;
 pub mod trace;
 
