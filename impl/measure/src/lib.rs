@@ -1,0 +1,36 @@
+//! # Measurements of DSR_d runs
+//!
+//! The numbers behind `cortex report`: how long an update takes from the source agent's write to its application
+//! at every receiving agent, how long until every replica reflects a write and until all digests are equal, how
+//! many bytes the transport put on the wire, and what the receivers cost in CPU — with the provenance (commit,
+//! compiler, machine, seeds, dataset checksums) needed to read them later.
+//!
+//! - [`clock`] — one monotonic clock for the whole run ([`clock::MonoClock`]), so a send time and a receive time
+//!   on different threads are comparable (one host, one clock).
+//! - [`latency`] — HDR histograms per payload class ([`latency::PayloadClass`]) and their percentiles.
+//! - [`run`] — the in-process experiment: a planned sequence of encoded deltas (a replayed log or synthetic
+//!   writes) published through a [`transport::Transport`] (the in-process bus, optionally behind the seeded fault
+//!   injector) to N-1 receiver replicas on their own threads; per-write latencies, convergence windows, bytes.
+//! - [`workload`] — the planned writes: a bundled ROS 2 log through the `replay` bridge, or synthetic byte
+//!   attributes of a chosen size at a chosen rate.
+//! - [`partition`] — agents (`agent::Agent`, with anti-entropy) on the in-process bus: the time to reconverge
+//!   after a partition heals.
+//! - [`provenance`] — commit, rustc, machine (cores, memory, CPU model from `/proc`), dataset checksums.
+//!
+//! Results serialise to JSON with [`SCHEMA_VERSION`]; a change that renames or removes a field bumps it.
+
+pub mod clock;
+pub mod latency;
+pub mod partition;
+pub mod provenance;
+pub mod run;
+pub mod workload;
+
+/// Version of the JSON result schema written by `cortex report` (`results.json`).
+pub const SCHEMA_VERSION: u32 = 1;
+
+pub use clock::MonoClock;
+pub use latency::{LatencyRecorder, PayloadClass, Percentiles};
+pub use provenance::Provenance;
+pub use run::{RunConfig, RunResult};
+pub use workload::{PlannedWrite, Workload};
