@@ -2,6 +2,13 @@
 //! hand, by scripts and by the multi-process tests. It can start from a CORTEX JSON graph, insert some nodes of
 //! its own (a scripted writer for tests), print its status as JSON lines, and write the graph as CORTEX JSON when
 //! it stops (Ctrl-C or `--run-for-ms`).
+//!
+//! With `--role`, the process also runs a BICA runtime (real clock, its own thread) whose components work on the
+//! agent's graph through `perception::agent_graph`: `camera-detector`, `laser-detector` and `attention` are the
+//! trees of `perception::roles`; `fixture-camera` writes the bundled EuRoC frames into the `cam_rgb` of a camera
+//! node (a stand-in for a sensor bridge). The runtime's named methods (`runtime.components`,
+//! `runtime.debug_frame`, `runtime.set_debug`, `runtime.methods` and the role's own) are served to other agents
+//! over the `Calls` channel.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -9,9 +16,18 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use agent::{Agent, AgentConfig, AgentId};
-use anyhow::{Context, Result, bail};
-use clap::Args;
-use dsr::{NewNode, attrs};
+use anyhow::{Context, Result, anyhow, bail};
+use bica::prelude::*;
+use bica::service::{Service, ServiceBuilder};
+use clap::{Args, ValueEnum};
+use dsr::{NewNode, NodeId, attrs};
+use perception::agent_graph::share_agent;
+use perception::attention::{Scanner, StimulusKind};
+use perception::blobs::{BlobConfig, BlobDetector};
+use perception::graph::SharedGraph;
+use perception::labelling::{ColourClass, LabelConfig, LabelTables};
+use perception::obstacles::{LaserObstacleDetector, ObstacleConfig};
+use perception::sensors::{CameraReader, Image, LaserReader, write_image};
 use transport::SystemClock;
 use transport::rtps::{RtpsConfig, RtpsTransport};
 
@@ -48,6 +64,29 @@ pub struct AgentArgs {
     /// Stop by itself after this long (otherwise run until Ctrl-C).
     #[arg(long)]
     pub run_for_ms: Option<u64>,
+    /// Run this BICA role on the agent's graph and serve its runtime's methods to other agents.
+    #[arg(long, value_enum)]
+    pub role: Option<Role>,
+    /// The role's node: the camera (camera-detector, fixture-camera), the laser (laser-detector) or the head
+    /// (attention).
+    #[arg(long, default_value = "cam0")]
+    pub sensor: String,
+    /// Period of the role's components.
+    #[arg(long, default_value_t = 100)]
+    pub period_ms: u64,
+}
+
+/// The BICA roles an agent process can run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Role {
+    /// Camera reader, colour labeller ("bright" class) and blob detector: `blob` nodes under the camera node.
+    CameraDetector,
+    /// Laser reader and obstacle detector: `obstacle` nodes under the laser node.
+    LaserDetector,
+    /// The search/track behaviour over attention, head and scanner, with blobs of class 0 as stimuli.
+    Attention,
+    /// Writes the bundled EuRoC frames into the camera node (inserted if missing), each frame 5 times in a row.
+    FixtureCamera,
 }
 
 /// Runs `cortex agent`.
@@ -63,7 +102,18 @@ pub fn run(args: AgentArgs) -> Result<()> {
     }
     let rtps = RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() };
     let transport = RtpsTransport::new(rtps).context("joining the DDS domain")?;
-    let agent = Agent::start(config, transport, Arc::new(SystemClock))?;
+    let agent = Arc::new(Agent::start(config, transport, Arc::new(SystemClock))?);
+    let driver = match args.role {
+        Some(role) => {
+            if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {
+                bail!("agent {} got no graph in time to start role {role:?}", args.id);
+            }
+            let (driver, service) = start_role(role, &agent, &args.sensor, args.period_ms)?;
+            agent.serve_calls(Arc::new(service));
+            Some(driver)
+        }
+        None => None,
+    };
 
     let stop = Arc::new(AtomicBool::new(false));
     {
@@ -89,6 +139,10 @@ pub fn run(args: AgentArgs) -> Result<()> {
             println!("{}", status_json(&agent, started));
         }
         std::thread::sleep(Duration::from_millis(10));
+    }
+    if let Some(driver) = driver {
+        agent.stop_serving_calls();
+        driver.stop().context("stopping the role's runtime")?;
     }
     agent.shutdown();
     if args.json_status {
@@ -118,6 +172,104 @@ fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> s
         "collision": status.collision,
         "uptime_ms": started.elapsed().as_millis() as u64,
         "samples_sent": status.transport.samples_sent,
+        "calls_served": status.calls_served,
+        "node_types": agent.read(|r| {
+            let mut counts = std::collections::BTreeMap::<String, u64>::new();
+            for node in r.nodes() {
+                *counts.entry(node.node_type().to_string()).or_default() += 1;
+            }
+            counts
+        }),
         "wire_bytes_sent": status.transport.wire_bytes_sent,
     })
+}
+
+fn ms(period_ms: u64) -> u64 {
+    period_ms.max(1) * 1_000_000
+}
+
+/// Starts `role`'s runtime on its own thread, over `agent`'s graph; returns it with its named methods.
+fn start_role(
+    role: Role,
+    agent: &Arc<Agent<RtpsTransport>>,
+    sensor: &str,
+    period_ms: u64,
+) -> Result<(Driver, Service)> {
+    let frames = match role {
+        Role::FixtureCamera => perception::fixtures::euroc_frames().context("reading the EuRoC fixtures")?,
+        _ => Vec::new(),
+    };
+    let tables = LabelTables::new(LabelConfig {
+        classes: vec![ColourClass { name: "bright".into(), min: [200; 3], max: [255; 3], display: [255, 255, 0] }],
+    })
+    .map_err(|e| anyhow!("colour tables: {e}"))?;
+    let agent = Arc::clone(agent);
+    let sensor = sensor.to_owned();
+    let driver = Driver::spawn(RuntimeConfig::default(), move |runtime| {
+        let graph = share_agent(agent);
+        let failed = |message: String| BicaError::StepFailed { component: format!("role {role:?}"), message };
+        let built = match role {
+            Role::CameraDetector => {
+                let blobs = BlobConfig { min_area_px: 200, ..BlobConfig::default() };
+                perception::roles::camera_detector(runtime, graph, &sensor, tables, blobs, period_ms)
+            }
+            Role::LaserDetector => {
+                perception::roles::laser_detector(runtime, graph, &sensor, ObstacleConfig::default(), period_ms)
+            }
+            Role::Attention => {
+                perception::roles::attention(runtime, graph, &sensor, StimulusKind::Blob { class: 0 }, period_ms)
+            }
+            Role::FixtureCamera => {
+                runtime
+                    .register(FixtureCamera { graph, name: sensor, node: None, frames, written: 0 }, ms(period_ms))?;
+                return runtime.activate::<FixtureCamera>();
+            }
+        };
+        built.map_err(|e| failed(e.to_string()))
+    })
+    .map_err(|e| anyhow!("starting role {role:?}: {e}"))?;
+    let methods = ServiceBuilder::new();
+    let methods = match role {
+        Role::CameraDetector => methods
+            .method("BlobDetector.blob_count", |d: &mut BlobDetector, (): ()| d.blobs().len() as u64)
+            .method("CameraReader.readings", |r: &mut CameraReader, (): ()| r.readings()),
+        Role::LaserDetector => methods
+            .method("LaserObstacleDetector.cluster_count", |d: &mut LaserObstacleDetector, (): ()| {
+                d.clusters().len() as u64
+            })
+            .method("LaserReader.readings", |r: &mut LaserReader, (): ()| r.readings()),
+        Role::Attention => methods.method("Scanner.runs", |s: &mut Scanner, (): ()| s.runs()),
+        Role::FixtureCamera => methods.method("FixtureCamera.written", |c: &mut FixtureCamera, (): ()| c.written),
+    };
+    let service = methods.build(driver.remote());
+    Ok((driver, service))
+}
+
+/// Writes the bundled frames into camera node `name` (inserted if missing), each 5 times in a row, so the
+/// detector's tracks of a frame's blobs get confirmed before the next frame.
+struct FixtureCamera {
+    graph: SharedGraph,
+    name: String,
+    node: Option<NodeId>,
+    frames: Vec<Image>,
+    written: u64,
+}
+
+impl Component for FixtureCamera {
+    fn step(&mut self, ctx: &mut StepContext<'_>) -> Result<(), BicaError> {
+        let now = ctx.now_ns();
+        let failed = |message: String| BicaError::StepFailed { component: "FixtureCamera".into(), message };
+        let mut graph = self.graph.borrow_mut();
+        let node = match self.node.or_else(|| graph.find_node(&self.name)) {
+            Some(node) => node,
+            None => graph.insert_node(now, NewNode::new("camera", &self.name)).map_err(|e| failed(e.to_string()))?,
+        };
+        self.node = Some(node);
+        let Some(frame) = self.frames.get((self.written / 5) as usize % self.frames.len().max(1)) else {
+            return Ok(());
+        };
+        write_image(&mut *graph, now, node, frame, now, self.written).map_err(|e| failed(e.to_string()))?;
+        self.written += 1;
+        Ok(())
+    }
 }

@@ -2,7 +2,7 @@
 //! [`dsr::Replica`] in tests and on an agent's thread-safe replica (which also broadcasts the deltas) in the role
 //! processes. Components hold a [`SharedGraph`]: they run on the single BICA scheduler thread, so an
 //! `Rc<RefCell<_>>` is enough; an agent implements [`GraphAccess`] on a small adapter that locks its replica and
-//! sends the resulting deltas.
+//! sends the resulting deltas ([`crate::agent_graph::AgentGraph`]).
 //!
 //! Units follow the dictionary: translations in mm, angles in rad.
 

@@ -14,10 +14,12 @@
 //! - [`attention`]: picks the stimulus that governs attention from the behaviours' requirements and drives the
 //!   [`attention::Head`], which writes the gaze target into the graph;
 //! - [`behaviour`]: a search/track FSM that changes which components are active at run time;
-//! - [`roles`]: one function per agent role that registers its BICA tree given a graph handle.
+//! - [`roles`]: one function per agent role that registers its BICA tree given a graph handle;
+//! - [`agent_graph`]: the graph handle of a role process, over a running DSR_d agent.
 //!
 //! Units follow the graph: mm and rad.
 
+pub mod agent_graph;
 pub mod attention;
 pub mod behaviour;
 pub mod blobs;
