@@ -2,9 +2,11 @@
 //! `cam_rgb` of camera node `cam0`; one `cortex agent --role camera-detector` reads them from its own replica,
 //! detects bright blobs and writes `blob` nodes under the camera, which must appear in the first agent's graph.
 //! The detector's runtime is then called from this test through an agent of its own: its components with
-//! statistics, a role method and the latest debug frame come back over the `Calls` channel.
+//! statistics, a role method and the latest debug frame come back over the `Calls` channel. Last, `cortex inspect
+//! --debug-agent 2` serves the detector's components and primitives in its Debug view's JSON.
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
 use std::sync::mpsc;
@@ -97,4 +99,42 @@ fn a_camera_detector_process_writes_blob_nodes_into_the_camera_agents_graph() {
     let unknown = caller.call::<(), ()>(AgentId(1), "BlobDetector.blob_count", &(), Duration::from_secs(5));
     assert!(matches!(unknown, Err(CallError::UnknownMethod { .. })), "{unknown:?}");
     caller.shutdown();
+
+    // The inspector's Debug view of the detector process.
+    let mut inspect = Command::new(env!("CARGO_BIN_EXE_cortex"))
+        .args(["inspect", "--id", "10", "--domain", "0", "--topic-prefix", &prefix, "--listen", "127.0.0.1:0"])
+        .args(["--debug-agent", "2", "--join-wait-ms", "30000"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("cortex inspect starts");
+    let mut line = String::new();
+    BufReader::new(inspect.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let _inspect = Proc(inspect);
+    let addr = line.split("http://").nth(1).and_then(|rest| rest.split_whitespace().next()).expect(&line).to_owned();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let debug = get_json(&addr, "/api/debug");
+        assert_eq!(debug["available"], true, "{debug}");
+        let listed = debug["components"].as_array().cloned().unwrap_or_default();
+        let entries = debug["frame"]["entries"].as_array().map_or(0, Vec::len);
+        if listed.iter().any(|c| c["name"].as_str().is_some_and(|n| n.ends_with("BlobDetector"))) && entries > 0 {
+            assert!(listed.iter().any(|c| c["marked"] == true), "{debug}");
+            break;
+        }
+        assert!(Instant::now() < deadline, "the Debug view never showed the detector: {debug}");
+        std::thread::sleep(Duration::from_millis(300));
+    }
+}
+
+/// One GET on the inspector's HTTP server, the body parsed as JSON.
+fn get_json(addr: &str, path: &str) -> serde_json::Value {
+    let mut stream = TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(stream, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).unwrap();
+    let body = response.split_once("\r\n\r\n").map(|(_, body)| body).expect(&response);
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{path}: {e}: {body}"))
 }

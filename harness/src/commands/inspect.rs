@@ -1,7 +1,8 @@
 //! `cortex inspect`: joins the graph as an agent over RTPS and serves the web inspector (graph, RT tree, 2-D
 //! world and BICA debug views; edits with `--allow-edit`). Loopback by default; everything the page needs is
 //! inside the binary. `--demo` also runs the camera-detector role on the bundled EuRoC frames in this process, so
-//! the Debug view has a runtime to show.
+//! the Debug view has a runtime to show; `--debug-agent N` shows instead the runtime of agent N (a
+//! `cortex agent --role` process), called over the network.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -12,7 +13,7 @@ use std::time::{Duration, Instant};
 use agent::{Agent, AgentConfig, AgentId};
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use inspector::debug::DebugSource;
+use inspector::debug::{DebugSource, RemoteDebug};
 use inspector::feed::GraphFeed;
 use inspector::{Inspector, InspectorConfig};
 use transport::SystemClock;
@@ -44,8 +45,12 @@ pub struct InspectArgs {
     pub join_wait_ms: u64,
     /// Run the camera-detector role on the bundled EuRoC frames in this process (Debug view), mirroring the
     /// frames into the graph as node `demo_cam0`.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "debug_agent")]
     pub demo: bool,
+    /// Show in the Debug view the BICA runtime of this agent (a `cortex agent --role` process), through remote
+    /// calls.
+    #[arg(long)]
+    pub debug_agent: Option<u32>,
     /// Stop by itself after this long (otherwise run until Ctrl-C).
     #[arg(long)]
     pub run_for_ms: Option<u64>,
@@ -81,6 +86,12 @@ pub fn run(args: InspectArgs) -> Result<()> {
         let (running, source) = inspector::demo::Demo::start(Some(Arc::clone(&feed)))?;
         demo = Some(running);
         debug = Some(Arc::new(source));
+    }
+    if let Some(target) = args.debug_agent {
+        if target >= AgentId::LIMIT || target == args.id {
+            bail!("--debug-agent {target} must be another agent's id (0..{}, not {})", AgentId::LIMIT, args.id);
+        }
+        debug = Some(Arc::new(RemoteDebug::new(Arc::clone(&agent), AgentId(target))));
     }
     let title = format!("cortex inspect · domain {} · {}", args.domain, args.topic_prefix);
     let inspector =

@@ -10,7 +10,8 @@
 //! - [`stream`]: the bounded, coalescing, rate-limited server-sent event stream.
 //! - [`http`]: a small HTTP/1.1 server with size limits and time-outs.
 //! - [`edit`]: edit requests from the page, parsed by the dictionary's types.
-//! - [`debug`]: [`debug::DebugSource`] and its implementation for an in-process `bica` runtime.
+//! - [`debug`]: [`debug::DebugSource`] and its implementations for an in-process `bica` runtime and for the
+//!   runtime of another agent, called over the network.
 //! - [`demo`]: a camera-detector role on the bundled EuRoC frames, for `cortex inspect --demo`.
 
 pub mod debug;
