@@ -9,3 +9,4 @@ pub mod datasets;
 pub mod graph;
 pub mod inspect;
 pub mod replay;
+pub mod report;

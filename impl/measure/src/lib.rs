@@ -15,14 +15,21 @@
 //!   attributes of a chosen size at a chosen rate.
 //! - [`partition`] — agents (`agent::Agent`, with anti-entropy) on the in-process bus: the time to reconverge
 //!   after a partition heals.
+//! - [`experiment`] — experiment files (TOML) and the runner of a set of experiments.
+//! - [`figures`] — line charts as SVG and PNG with an embedded font (no system font libraries).
 //! - [`provenance`] — commit, rustc, machine (cores, memory, CPU model from `/proc`), dataset checksums.
+//!
+//! - [`report`] — `results.json`, the figures and `report.md` of an experiment set.
 //!
 //! Results serialise to JSON with [`SCHEMA_VERSION`]; a change that renames or removes a field bumps it.
 
 pub mod clock;
+pub mod experiment;
+pub mod figures;
 pub mod latency;
 pub mod partition;
 pub mod provenance;
+pub mod report;
 pub mod run;
 pub mod workload;
 

@@ -22,6 +22,7 @@ use std::time::Duration;
 use anyhow::Context as _;
 use bytes::{BufMut as _, Bytes, BytesMut};
 use dsr::{Delta, Replica, ReplicaId};
+use hdrhistogram::Histogram;
 use serde::Serialize;
 use transport::fault::{FaultConfig, FaultPlan};
 use transport::inproc::Bus;
@@ -118,6 +119,12 @@ pub struct RunResult {
     pub receiver_cpu_ns: Vec<Option<u64>>,
     /// Peak resident memory of the whole process so far (`VmHWM`), bytes: the agents share the process.
     pub process_peak_rss_bytes: Option<u64>,
+    /// Every latency, for merging runs (not serialised; the percentiles and CDF points are).
+    #[serde(skip)]
+    pub latency_histogram: Histogram<u64>,
+    /// Every per-write convergence window, for merging runs (not serialised).
+    #[serde(skip)]
+    pub convergence_histogram: Histogram<u64>,
 }
 
 struct ReceiverOutcome {
@@ -312,9 +319,9 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
         publish_seconds: last_publish.saturating_sub(start) as f64 / 1e9,
         latency: latency.overall(),
         latency_by_class: latency.by_class().into_iter().collect(),
-        latency_cdf: latency.cdf(200),
+        latency_cdf: latency.cdf(50),
         convergence: Percentiles::of(&windows),
-        convergence_cdf: latency::cdf(&windows, 200),
+        convergence_cdf: latency::cdf(&windows, 50),
         writes_not_everywhere: not_everywhere,
         end_convergence_ns: digests_equal.then(|| last_apply.saturating_sub(last_publish)),
         digests_equal,
@@ -323,6 +330,8 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
         source_cpu_ns,
         receiver_cpu_ns: outcomes.iter().map(|o| o.cpu_ns).collect(),
         process_peak_rss_bytes: peak_rss_bytes(),
+        latency_histogram: latency.histogram().clone(),
+        convergence_histogram: windows,
     })
 }
 

@@ -1,0 +1,65 @@
+//! `cortex report`: run an experiment set and write a paper-style report.
+//!
+//! Reads an experiment file (`experiments/paper.toml` by default; TOML, see `measure::experiment`), runs its
+//! `quick` set (the default, at most 5 minutes on 2 cores) or its `full` sweep (`--full`) with a progress bar, and
+//! writes into `--out` (default `reports/<name>-<mode>`): `results.json` (versioned schema with commit, rustc,
+//! machine, seeds and dataset checksums), the figures as SVG and PNG, and `report.md`. Every run is in process;
+//! the report says so on every figure.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use measure::experiment::{ExperimentFile, run_set};
+
+/// Arguments of `cortex report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// The experiment file.
+    #[arg(long, default_value = "experiments/paper.toml")]
+    config: PathBuf,
+    /// Directory of the report (created; files in it are replaced). Default: `reports/<name>-<quick|full>`.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Run the file's quick set (the default).
+    #[arg(long, conflicts_with = "full")]
+    quick: bool,
+    /// Run the file's whole sweep.
+    #[arg(long)]
+    full: bool,
+}
+
+/// Runs `cortex report`.
+///
+/// # Errors
+/// An experiment file that cannot be read or parsed, a log that cannot be read, a failed run, or a report that
+/// cannot be written.
+pub fn run(args: ReportArgs) -> anyhow::Result<()> {
+    let file = ExperimentFile::load(&args.config)?;
+    let root = ExperimentFile::root_of(&args.config);
+    let (mode, set) = if args.full { ("full", &file.full) } else { ("quick", &file.quick) };
+    let out = args.out.unwrap_or_else(|| root.join("reports").join(format!("{}-{mode}", file.name)));
+    let bar = ProgressBar::new(set.steps());
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs  {msg}")
+            .context("progress bar template")?
+            .progress_chars("=> "),
+    );
+    bar.set_message(format!("{} ({mode})", file.name));
+    let mut progress = |label: &str| {
+        bar.inc(1);
+        bar.set_message(label.to_owned());
+    };
+    let results = run_set(set, &root, &file.name, mode, &mut progress)?;
+    bar.finish_and_clear();
+    measure::report::write(&results, &out)?;
+    println!(
+        "report {} ({mode}): {} runs in {:.1} s, written to {}",
+        file.name,
+        set.steps(),
+        results.seconds,
+        out.join("report.md").display()
+    );
+    Ok(())
+}

@@ -1,0 +1,106 @@
+//! `cortex report` end to end on a tiny experiment file: every figure (SVG and PNG) and every section of
+//! `report.md` exists, `results.json` carries the schema version and provenance, and the report says which
+//! transport its figures used. Also: a malformed experiment file is refused with a message naming the field.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn cortex(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_cortex")).args(args).output().expect("cortex runs")
+}
+
+fn repo(path: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path).display().to_string()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("cortex-report-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("experiments")).unwrap();
+    dir
+}
+
+fn tiny_set(euroc: &str, sick: &str) -> String {
+    format!(
+        r#"agents = [2, 3]
+seeds = [7]
+logs = [{{ path = "{sick}", rate = "20" }}, {{ path = "{euroc}", rate = "4" }}]
+[payload]
+sizes = [16, 65536]
+rate_hz = 200
+count = 5
+agents = 3
+[faults]
+agents = 3
+log = {{ path = "{euroc}", rate = "4" }}
+variants = [{{ label = "no faults" }}, {{ label = "delayed", delay_ms = [0.0, 1.0], duplicate = 0.1 }}]
+[partition]
+agents = 2
+partition_ms = 50
+rate_hz = 100
+announce_ms = 50
+repetitions = 1
+"#
+    )
+}
+
+#[test]
+fn tiny_report_has_every_figure_and_section() {
+    let dir = scratch("tiny");
+    let (euroc, sick) =
+        (repo("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap"), repo("datasets/logs/sick_tim7xx_scan_10s.mcap"));
+    let set = tiny_set(&euroc, &sick);
+    let config = format!(
+        "name = \"tiny\"\ndescription = \"test\"\n{}{}",
+        set.replace("\n[", "\n[quick.").replacen("agents = [2, 3]", "[quick]\nagents = [2, 3]", 1),
+        set.replace("\n[", "\n[full.").replacen("agents = [2, 3]", "[full]\nagents = [2, 3]", 1)
+    );
+    let config_path = dir.join("experiments/tiny.toml");
+    std::fs::write(&config_path, config).unwrap();
+    let out = dir.join("out");
+    let output = cortex(&["report", "--config", config_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(String::from_utf8_lossy(&output.stdout).contains("report tiny (quick)"));
+
+    for stem in measure::report::FIGURES {
+        let svg = std::fs::read_to_string(out.join(format!("{stem}.svg"))).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("commit"), "{stem}.svg names no commit");
+        let png = std::fs::read(out.join(format!("{stem}.png"))).unwrap();
+        assert_eq!(&png[1..4], b"PNG", "{stem}.png");
+    }
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let mut last = 0;
+    for section in measure::report::SECTIONS {
+        let at = report.find(section).unwrap_or_else(|| panic!("missing section {section}"));
+        assert!(at >= last, "section {section} out of order");
+        last = at;
+    }
+    for stem in measure::report::FIGURES {
+        assert!(report.contains(&format!("]({stem}.svg)")), "report.md does not show {stem}");
+    }
+    assert!(report.contains("No figure here was measured over RTPS"));
+    assert!(report.contains("measured elsewhere"));
+
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(results["provenance"]["schema_version"], measure::SCHEMA_VERSION);
+    assert_eq!(results["mode"], "quick");
+    assert_eq!(results["replay"].as_array().unwrap().len(), 4, "2 logs x 2 agent counts x 1 seed");
+    assert!(results["replay"].as_array().unwrap().iter().all(|r| r["digests_equal"] == true));
+    assert_eq!(results["provenance"]["datasets"].as_array().unwrap().len(), 2);
+    assert!(results["provenance"]["datasets"].as_array().unwrap().iter().all(|d| d["sha256"] == d["manifest_sha256"]));
+    assert!(results["partition"][0]["reconverge_ns"].is_u64());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn malformed_experiment_file_is_refused_naming_the_field() {
+    let dir = scratch("bad");
+    let config_path = dir.join("experiments/bad.toml");
+    std::fs::write(&config_path, "name = \"bad\"\ndescription = \"x\"\nspeed = 3\n").unwrap();
+    let output = cortex(&["report", "--config", config_path.to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("not a valid experiment file") && stderr.contains("speed"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

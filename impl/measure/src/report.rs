@@ -1,0 +1,483 @@
+//! The report of an experiment set: `results.json` (the versioned schema), the figures (SVG and PNG) and
+//! `report.md`, which puts every number beside how it was obtained and beside the DSR_d paper's claims and the
+//! published figures of the C++ implementation (labelled as measured elsewhere).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Context as _;
+use hdrhistogram::Histogram;
+
+use crate::experiment::Results;
+use crate::figures::{self, Chart, Series};
+use crate::latency::{self, Percentiles};
+use crate::run::RunResult;
+
+/// Stems of the figures a report contains (each written as `.svg` and `.png`).
+pub const FIGURES: [&str; 4] =
+    ["latency_cdf_by_agents", "latency_vs_payload", "bandwidth_vs_agents", "convergence_windows"];
+
+/// Headings of the sections of `report.md`, in order.
+pub const SECTIONS: [&str; 9] = [
+    "## How this report was obtained",
+    "## Beside the paper's claims and the C++ implementation",
+    "## Latency by number of agents",
+    "## Latency against payload size",
+    "## Bandwidth against number of agents",
+    "## Convergence windows",
+    "## CPU and memory",
+    "## Not measured yet",
+    "## Datasets",
+];
+
+fn ms(ns: u64) -> f64 {
+    ns as f64 / 1e6
+}
+
+fn pct_row(p: &Percentiles) -> String {
+    format!(
+        "{} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3}",
+        p.count,
+        ms(p.p50_ns),
+        ms(p.p90_ns),
+        ms(p.p99_ns),
+        ms(p.p999_ns),
+        ms(p.max_ns)
+    )
+}
+
+const PCT_HEAD: &str = "count | p50 ms | p90 ms | p99 ms | p99.9 ms | max ms";
+const PCT_RULE: &str = "---:|---:|---:|---:|---:|---:";
+
+fn merged<'a>(runs: impl Iterator<Item = &'a RunResult>, pick: fn(&RunResult) -> &Histogram<u64>) -> Histogram<u64> {
+    let mut all = latency::histogram();
+    for run in runs {
+        let _ = all.add(pick(run));
+    }
+    all
+}
+
+fn cdf_ms(h: &Histogram<u64>) -> Vec<(f64, f64)> {
+    latency::cdf(h, 200).into_iter().map(|(ns, q)| (ms(ns), q)).collect()
+}
+
+/// Writes `results.json`, the figures and `report.md` into `out`.
+///
+/// # Errors
+/// A file that cannot be written or a figure that cannot be drawn.
+pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let json = serde_json::to_string_pretty(results)?;
+    std::fs::write(out.join("results.json"), json).context("cannot write results.json")?;
+    let p = &results.provenance;
+    let seeds = p.seeds.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(", ");
+    let footer = |transport: &str| {
+        vec![
+            format!("command: {}   commit {}   {}", p.command, p.short_commit(), p.rustc),
+            format!("machine: {}", p.machine.summary()),
+            format!("transport: {transport}   seeds: {seeds}"),
+        ]
+    };
+    let inproc = "in-process bus (transport::inproc), receivers on their own threads, one process";
+
+    // Figure 1: latency CDF per number of agents, all logs and seeds merged.
+    let mut by_agents: BTreeMap<u32, Vec<&RunResult>> = BTreeMap::new();
+    for run in &results.replay {
+        by_agents.entry(run.agents).or_default().push(run);
+    }
+    let series = by_agents
+        .iter()
+        .map(|(n, runs)| Series {
+            name: format!("N = {n}"),
+            points: cdf_ms(&merged(runs.iter().copied(), |r| &r.latency_histogram)),
+        })
+        .collect();
+    let chart = Chart {
+        title: "Latency from write to application, all bundled logs".into(),
+        x_label: "latency (ms, log scale)".into(),
+        y_label: "fraction of (write, receiver) pairs".into(),
+        x_log: true,
+        series,
+        footer: footer(inproc),
+        ..Chart::default()
+    };
+    figures::render(&chart, out, FIGURES[0])?;
+
+    // Figure 2: latency against payload size.
+    let point = |f: fn(&Percentiles) -> u64| -> Vec<(f64, f64)> {
+        results
+            .set
+            .payload
+            .sizes
+            .iter()
+            .zip(&results.payload)
+            .map(|(&size, r)| (size as f64, ms(f(&r.latency))))
+            .collect()
+    };
+    let chart = Chart {
+        title: format!(
+            "Latency against payload size ({} agents, {} Hz, {} writes per size)",
+            results.set.payload.agents, results.set.payload.rate_hz, results.set.payload.count
+        ),
+        x_label: "bytes of the attribute written (log scale)".into(),
+        y_label: "latency (ms, log scale)".into(),
+        x_log: true,
+        y_log: true,
+        series: vec![
+            Series { name: "p50".into(), points: point(|p| p.p50_ns) },
+            Series { name: "p99".into(), points: point(|p| p.p99_ns) },
+            Series { name: "max".into(), points: point(|p| p.max_ns) },
+        ],
+        footer: footer(inproc),
+        legend_upper_left: false,
+    };
+    figures::render(&chart, out, FIGURES[1])?;
+
+    // Figure 3: bandwidth against number of agents, per log (mean over seeds).
+    let mut per_log: BTreeMap<&str, BTreeMap<u32, Vec<&RunResult>>> = BTreeMap::new();
+    for run in &results.replay {
+        per_log.entry(&run.workload).or_default().entry(run.agents).or_default().push(run);
+    }
+    let mean = |runs: &[&RunResult], f: fn(&RunResult) -> f64| {
+        runs.iter().map(|r| f(r)).sum::<f64>() / runs.len().max(1) as f64
+    };
+    let mut series = Vec::new();
+    for (log, by_n) in &per_log {
+        series.push(Series {
+            name: format!("sent, {log}"),
+            points: by_n
+                .iter()
+                .map(|(n, runs)| (f64::from(*n), mean(runs, |r| r.bandwidth.wire_bytes_per_second) / 1e6))
+                .collect(),
+        });
+    }
+    if let Some((log, by_n)) = per_log.iter().next() {
+        series.push(Series {
+            name: format!("received by all, {log}"),
+            points: by_n
+                .iter()
+                .map(|(n, runs)| (f64::from(*n), mean(runs, |r| r.bandwidth.received_bytes_per_second) / 1e6))
+                .collect(),
+        });
+    }
+    let chart = Chart {
+        title: "Bytes per second against number of agents (transport counters)".into(),
+        x_label: "agents (the source included)".into(),
+        y_label: "MB/s".into(),
+        series,
+        footer: footer(inproc),
+        legend_upper_left: true,
+        ..Chart::default()
+    };
+    figures::render(&chart, out, FIGURES[2])?;
+
+    // Figure 4: convergence windows with and without faults.
+    let series = results
+        .faults
+        .iter()
+        .map(|f| Series { name: f.label.clone(), points: cdf_ms(&f.run.convergence_histogram) })
+        .collect();
+    let chart = Chart {
+        title: format!(
+            "Per-write convergence window, {} agents, {}",
+            results.set.faults.agents,
+            results.faults.first().map_or("", |f| f.run.workload.as_str())
+        ),
+        x_label: "time until every replica reflects the write (ms, log scale)".into(),
+        y_label: "fraction of writes".into(),
+        x_log: true,
+        series,
+        footer: footer("in-process bus behind the seeded fault injector (transport::fault)"),
+        ..Chart::default()
+    };
+    figures::render(&chart, out, FIGURES[3])?;
+
+    std::fs::write(out.join("report.md"), markdown(results)).context("cannot write report.md")?;
+    Ok(())
+}
+
+fn figure(md: &mut String, stem: &str, alt: &str) {
+    let _ = writeln!(md, "![{alt}]({stem}.svg)\n\n(also [{stem}.png]({stem}.png))\n");
+}
+
+fn markdown(r: &Results) -> String {
+    let p = &r.provenance;
+    let mut md = String::new();
+    let _ = writeln!(md, "# Performance report: {} ({})\n", r.experiment, r.mode);
+    let _ = writeln!(
+        md,
+        "Generated by `cortex report`. Every run below is **in process**: the agents are replicas on their own threads \
+         joined by the in-process bus (`transport::inproc`), optionally behind the seeded fault injector; the partition \
+         runs use real agents (`agent::Agent`, with anti-entropy) on the same bus. **No figure here was measured over \
+         RTPS or with agents as separate processes.** Medians and percentiles of all runs, never a best run.\n"
+    );
+    let _ = writeln!(md, "{}\n", SECTIONS[0]);
+    let _ = writeln!(md, "| | |\n|---|---|");
+    let _ = writeln!(md, "| command | `{}` |", p.command);
+    let _ = writeln!(
+        md,
+        "| commit | `{}`{} |",
+        p.commit,
+        if p.dirty == Some(true) { " (uncommitted changes)" } else { "" }
+    );
+    let _ = writeln!(md, "| compiler | {} ({} build) |", p.rustc, if p.release_build { "release" } else { "debug" });
+    let _ = writeln!(md, "| machine | {} |", p.machine.summary());
+    let _ = writeln!(md, "| started | {} s after the Unix epoch; the set took {:.1} s |", p.started_unix_s, r.seconds);
+    let seeds = p.seeds.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(", ");
+    let _ = writeln!(md, "| seeds | {seeds} |");
+    let _ = writeln!(md, "| results | [`results.json`](results.json), schema version {} |\n", p.schema_version);
+    let _ = writeln!(
+        md,
+        "Latency is measured from the publication of a write's encoded delta at the source to its application (decoded \
+         and applied) at each receiver, on one monotonic clock; the bridge's decoding of the ROS messages happens \
+         before the clock starts. A sample carries the delta behind an 8-byte sequence number.\n"
+    );
+
+    // Comparison.
+    let _ = writeln!(md, "{}\n", SECTIONS[1]);
+    let worst = r.replay.iter().max_by_key(|x| x.latency.p99_ns);
+    let worst_p99 = worst.map_or(0, |x| x.latency.p99_ns);
+    let worst_at = worst.map_or_else(String::new, |x| format!(" ({}, N={}, seed {})", x.workload, x.agents, x.seed));
+    let worst_max = r.replay.iter().map(|x| x.latency.max_ns).max().unwrap_or(0);
+    let worst_conv = r.replay.iter().map(|x| x.convergence.p99_ns).max().unwrap_or(0);
+    let _ = writeln!(md, "| claim or figure | source | ours (this run) | verdict |\n|---|---|---|---|");
+    let _ = writeln!(
+        md,
+        "| latency below 50 ms \"for a wide range of configurations and payloads\" | DSR_d paper | worst p99 over every \
+         log and N: {:.2} ms{worst_at} (largest max {:.2} ms); worst per-write convergence p99 {:.2} ms | {} (in process only) |",
+        ms(worst_p99),
+        ms(worst_max),
+        ms(worst_conv),
+        if worst_p99 < 50_000_000 { "holds at p99" } else { "does not hold at p99" }
+    );
+    let (n_lo, n_hi) =
+        (r.set.agents.iter().min().copied().unwrap_or(0), r.set.agents.iter().max().copied().unwrap_or(0));
+    let bw = |n: u32| {
+        let runs: Vec<_> = r.replay.iter().filter(|x| x.agents == n).collect();
+        runs.iter().map(|x| x.bandwidth.wire_bytes_per_second).sum::<f64>() / 1e6
+    };
+    let _ = writeln!(
+        md,
+        "| bandwidth constant in the number of agents (multicast) | DSR_d paper | bytes sent, all logs: {:.2} MB/s at N={n_lo}, \
+         {:.2} MB/s at N={n_hi} | not tested: the in-process bus hands one copy to all receivers, so this is constant by \
+         construction; the RTPS measurement is missing |",
+        bw(n_lo),
+        bw(n_hi)
+    );
+    let image_at = |size: usize| {
+        r.set.payload.sizes.iter().position(|&s| s == size).and_then(|i| r.payload.get(i)).map(|x| x.latency)
+    };
+    if let Some(l) = image_at(360_960) {
+        let _ = writeln!(
+            md,
+            "| one-way latency, 360,960 B attribute at 20 Hz: N=1 reader p50 1.0–1.2 ms, p99 1.5–2.9 ms; N=6 p50 \
+             2.0–2.2 ms, p99 5.1–5.9 ms | C++ (FastDDS, separate processes), measured elsewhere (FACTS.md) | \
+             360,960 B at {} Hz to {} receivers: p50 {:.3} ms, p99 {:.3} ms | not comparable yet (in process vs RTPS) |",
+            r.set.payload.rate_hz,
+            r.set.payload.agents - 1,
+            ms(l.p50_ns),
+            ms(l.p99_ns)
+        );
+    }
+    let _ = writeln!(
+        md,
+        "| bandwidth flat in N: 7.26 MB/s at N=1, 7.28 MB/s at N=6 (control traffic 1.5→40 KB/s) | C++ (FastDDS), \
+         measured elsewhere (FACTS.md) | — | RTPS bandwidth against N not measured yet |"
+    );
+    let _ = writeln!(
+        md,
+        "| wire cost of one small attribute update: ~443 B at 100 Hz | C++ (FastDDS), measured elsewhere (FACTS.md) | \
+         mean sample size of the Husky log (small updates): {} | in-process sample size (delta + 8 B), no RTPS headers |\n",
+        r.replay
+            .iter()
+            .find(|x| x.workload.starts_with("husky"))
+            .map_or_else(|| "—".to_owned(), |x| format!("{:.0} B", x.sample_bytes as f64 / x.writes.max(1) as f64))
+    );
+
+    // Latency.
+    let _ = writeln!(md, "{}\n", SECTIONS[2]);
+    figure(&mut md, FIGURES[0], "latency CDFs by number of agents");
+    let _ = writeln!(md, "Every log and seed, per payload class (pairs of write and receiver):\n");
+    let _ = writeln!(md, "| log | N | seed | class | {PCT_HEAD} |\n|---|---:|---:|---|{PCT_RULE}|");
+    for run in &r.replay {
+        for (class, p) in &run.latency_by_class {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | {} |",
+                run.workload,
+                run.agents,
+                run.seed,
+                class.name(),
+                pct_row(p)
+            );
+        }
+    }
+    let _ = writeln!(md);
+
+    // Payload.
+    let _ = writeln!(md, "{}\n", SECTIONS[3]);
+    figure(&mut md, FIGURES[1], "latency against payload size");
+    let _ = writeln!(md, "| bytes | {PCT_HEAD} |\n|---:|{PCT_RULE}|");
+    for (size, run) in r.set.payload.sizes.iter().zip(&r.payload) {
+        let _ = writeln!(md, "| {size} | {} |", pct_row(&run.latency));
+    }
+    let _ = writeln!(md);
+
+    // Bandwidth.
+    let _ = writeln!(md, "{}\n", SECTIONS[4]);
+    figure(&mut md, FIGURES[2], "bandwidth against number of agents");
+    let _ = writeln!(
+        md,
+        "Bytes per second of the publishing span, from the transports' counters (`TransportStats`). The OS-level \
+         cross-check is the growth of the loopback interface's transmitted bytes (`/sys/class/net/lo/statistics/\
+         tx_bytes`) during the run: the in-process bus does not use the network, so it should be near zero (other \
+         processes on the machine add to it).\n"
+    );
+    let _ = writeln!(
+        md,
+        "| log | N | seed | sent MB/s | received MB/s (all receivers) | per receiver MB/s | loopback tx bytes | dropped |\n|---|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    for run in &r.replay {
+        let b = &run.bandwidth;
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.3} | {:.3} | {:.3} | {} | {} |",
+            run.workload,
+            run.agents,
+            run.seed,
+            b.wire_bytes_per_second / 1e6,
+            b.received_bytes_per_second / 1e6,
+            b.received_bytes_per_second / 1e6 / f64::from(run.agents - 1),
+            b.loopback_tx_bytes.map_or_else(|| "unreadable".to_owned(), |v| v.to_string()),
+            b.dropped_full
+        );
+    }
+    let _ = writeln!(md);
+
+    // Convergence.
+    let _ = writeln!(md, "{}\n", SECTIONS[5]);
+    figure(&mut md, FIGURES[3], "convergence windows with and without faults");
+    let _ = writeln!(
+        md,
+        "Per write: the time until every replica reflects it. After the replay ends: the time from the last write to \
+         the last application anywhere, when every receiver then has the source's digest.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| run | N | per-write {PCT_HEAD} | end of replay ms | digests equal | duplicates injected |\n|---|---:|{PCT_RULE}|---:|---|---:|"
+    );
+    let end = |x: &RunResult| x.end_convergence_ns.map_or_else(|| "never".to_owned(), |ns| format!("{:.3}", ms(ns)));
+    for f in &r.faults {
+        let x = &f.run;
+        let _ = writeln!(
+            md,
+            "| {} ({}) | {} | {} | {} | {} | {} |",
+            f.label,
+            x.workload,
+            x.agents,
+            pct_row(&x.convergence),
+            end(x),
+            x.digests_equal,
+            x.bandwidth.injected_duplicates
+        );
+    }
+    for x in &r.replay {
+        let _ = writeln!(
+            md,
+            "| replay {} seed {} | {} | {} | {} | {} | 0 |",
+            x.workload,
+            x.seed,
+            x.agents,
+            pct_row(&x.convergence),
+            end(x),
+            x.digests_equal
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nAfter a healed partition (real agents with anti-entropy, the last agent cut off while both sides write, then \
+         healed; time from the heal until every digest is equal; the announce period bounds it):\n"
+    );
+    let _ = writeln!(
+        md,
+        "| seed | agents | partition ms | announce ms | writes during it | samples cut | reconverged after ms |\n|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    for x in &r.partition {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} | {} |",
+            x.seed,
+            x.agents,
+            x.partition_ms,
+            x.announce_period_ms,
+            x.writes,
+            x.dropped,
+            x.reconverge_ns.map_or_else(|| "not within the timeout".to_owned(), |ns| format!("{:.1}", ms(ns)))
+        );
+    }
+    let mut times: Vec<u64> = r.partition.iter().filter_map(|x| x.reconverge_ns).collect();
+    times.sort_unstable();
+    if let (Some(first), Some(last)) = (times.first(), times.last()) {
+        let _ = writeln!(
+            md,
+            "\nMedian {:.1} ms, min {:.1} ms, max {:.1} ms over {} runs.\n",
+            ms(times[times.len() / 2]),
+            ms(*first),
+            ms(*last),
+            times.len()
+        );
+    }
+
+    // CPU.
+    let _ = writeln!(md, "{}\n", SECTIONS[6]);
+    let _ = writeln!(
+        md,
+        "CPU time of each thread from `/proc/thread-self/schedstat`: the source while publishing (it mostly sleeps \
+         until writes are due) and each receiver (decoding and applying). The agents share one process, so memory is \
+         the process's peak resident size (`VmHWM`) so far, not per agent.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| log | N | seed | source CPU ms | receiver CPU ms (mean) | receiver CPU % of span (mean) | process peak RSS MiB |\n|---|---:|---:|---:|---:|---:|---:|"
+    );
+    for x in &r.replay {
+        let cpus: Vec<u64> = x.receiver_cpu_ns.iter().flatten().copied().collect();
+        let mean = cpus.iter().sum::<u64>() as f64 / cpus.len().max(1) as f64;
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {} |",
+            x.workload,
+            x.agents,
+            x.seed,
+            x.source_cpu_ns.map_or_else(|| "?".to_owned(), |v| format!("{:.1}", ms(v))),
+            mean / 1e6,
+            100.0 * mean / 1e9 / x.publish_seconds.max(1e-3),
+            x.process_peak_rss_bytes
+                .map_or_else(|| "?".to_owned(), |v| format!("{:.0}", v as f64 / (1u64 << 20) as f64))
+        );
+    }
+    let _ = writeln!(md);
+
+    let _ = writeln!(md, "{}\n", SECTIONS[7]);
+    let _ = writeln!(
+        md,
+        "- Agents as separate processes over RTPS (`cortex agent`), hence real multicast bandwidth against N and the \
+         loopback cross-check of RTPS traffic; every figure above is in process.\n\
+         - Per-agent memory (the in-process agents share one process).\n\
+         - BICA statistics of the detector roles and the scheduler timeline of a detector under an injected overload.\n\
+         - MCAP output of a run (metrics as JSON-schema channels, graph deltas) for Foxglove.\n"
+    );
+
+    let _ = writeln!(md, "{}\n", SECTIONS[8]);
+    let _ = writeln!(md, "| file | bytes | sha256 | matches manifest |\n|---|---:|---|---|");
+    for d in &p.datasets {
+        let matches = match d.matches_manifest() {
+            Some(true) => "yes",
+            Some(false) => "**no**",
+            None => "not listed",
+        };
+        let _ = writeln!(md, "| {} | {} | `{}` | {matches} |", d.file, d.bytes, d.sha256);
+    }
+    md
+}
