@@ -1,8 +1,9 @@
 //! A demo for `cortex inspect --demo`: the `camera-detector` role of [`perception::roles`] on a BICA runtime in
 //! this process, fed with the three bundled EuRoC frames in turn (10 Hz), so the Debug view shows real primitives
-//! (the labelled image, blob rectangles). The role runs on its own replica (perception's graph adapter for an agent
-//! does not exist yet); each frame is also mirrored into the inspected agent's graph as the `cam_rgb` of a
-//! `camera` node called `demo_cam0`, so the Tree view shows the picture changing at camera rate.
+//! (the labelled image, blob rectangles). The role runs on a private replica, so the demo needs no other agent (a
+//! role on the shared graph is `cortex agent --role camera-detector`, shown with `cortex inspect --debug-agent N`);
+//! each frame is also mirrored into the inspected agent's graph as the `cam_rgb` of a `camera` node called
+//! `demo_cam0`, so the Tree view shows the picture changing at camera rate.
 
 use std::sync::Arc;
 
