@@ -78,7 +78,7 @@ fn tiny_report_has_every_figure_and_section() {
     for stem in measure::report::FIGURES {
         assert!(report.contains(&format!("]({stem}.svg)")), "report.md does not show {stem}");
     }
-    assert!(report.contains("No figure here was measured over RTPS"));
+    assert!(report.contains("No figure here was measured with agents as separate processes"));
     assert!(report.contains("measured elsewhere"));
 
     let results: serde_json::Value =

@@ -19,7 +19,7 @@ use transport::fault::FaultConfig;
 
 use crate::partition::{self, PartitionConfig, PartitionResult};
 use crate::provenance::{DatasetChecksum, Provenance};
-use crate::run::{self, RunConfig, RunResult};
+use crate::run::{self, Link, RunConfig, RunResult};
 use crate::workload::{self, Workload};
 
 /// An experiment file.
@@ -68,6 +68,22 @@ pub struct LogSpec {
 
 fn one() -> u32 {
     1
+}
+
+fn inproc_only() -> Vec<String> {
+    vec!["inproc".to_owned()]
+}
+
+fn default_domain() -> u16 {
+    71
+}
+
+fn link(name: &str, domain_id: u16) -> anyhow::Result<Link> {
+    match name {
+        "inproc" => Ok(Link::InProc),
+        "rtps" => Ok(Link::Rtps { domain_id }),
+        other => anyhow::bail!("unknown transport {other:?} (inproc or rtps)"),
+    }
 }
 
 /// Synthetic writes of growing size.
@@ -157,6 +173,13 @@ pub struct ExperimentSet {
     pub agents: Vec<u32>,
     /// Seeds (one run per seed: the repetitions).
     pub seeds: Vec<u64>,
+    /// Transports of the replay sweep: `inproc` (the in-process bus) and/or `rtps` (one rustdds participant per
+    /// agent, all in this process, over loopback).
+    #[serde(default = "inproc_only")]
+    pub transports: Vec<String>,
+    /// DDS domain id of the RTPS runs.
+    #[serde(default = "default_domain")]
+    pub rtps_domain: u16,
     /// Latency against payload size.
     pub payload: PayloadSweep,
     /// Convergence with and without faults.
@@ -168,7 +191,7 @@ pub struct ExperimentSet {
 impl ExperimentSet {
     /// Number of runs, for progress bars.
     pub fn steps(&self) -> u64 {
-        (self.logs.len() * self.agents.len() * self.seeds.len()
+        (self.logs.len() * self.agents.len() * self.seeds.len() * self.transports.len()
             + self.payload.sizes.len()
             + self.faults.variants.len()
             + self.partition.repetitions as usize) as u64
@@ -243,15 +266,18 @@ pub fn run_set(
     provenance.seeds.insert("faults".into(), 1);
     provenance.seeds.insert("partition_first_of_1_to_repetitions".into(), 1);
 
+    let links = set.transports.iter().map(|t| link(t, set.rtps_domain)).collect::<anyhow::Result<Vec<_>>>()?;
     let mut replay = Vec::new();
     for spec in &set.logs {
         let workload = plan(root, spec)?;
-        for &agents in &set.agents {
-            for &seed in &set.seeds {
-                let result = run::run(&workload, &RunConfig { agents, seed, ..RunConfig::default() })
-                    .with_context(|| format!("{} with {agents} agents", workload.name))?;
-                progress(&format!("{} N={agents} seed {seed}", workload.name));
-                replay.push(result);
+        for &link in &links {
+            for &agents in &set.agents {
+                for &seed in &set.seeds {
+                    let result = run::run(&workload, &RunConfig { agents, seed, link, ..RunConfig::default() })
+                        .with_context(|| format!("{} with {agents} agents over {}", workload.name, link.name()))?;
+                    progress(&format!("{} {} N={agents} seed {seed}", workload.name, link.name()));
+                    replay.push(result);
+                }
             }
         }
     }

@@ -58,6 +58,11 @@ fn merged<'a>(runs: impl Iterator<Item = &'a RunResult>, pick: fn(&RunResult) ->
     all
 }
 
+/// `log (transport)`: the first columns of the replay tables.
+fn label(run: &RunResult) -> String {
+    format!("{} ({})", run.workload, run.transport)
+}
+
 fn cdf_ms(h: &Histogram<u64>) -> Vec<(f64, f64)> {
     latency::cdf(h, 200).into_iter().map(|(ns, q)| (ms(ns), q)).collect()
 }
@@ -80,16 +85,18 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
         ]
     };
     let inproc = "in-process bus (transport::inproc), receivers on their own threads, one process";
+    let both =
+        "inproc = in-process bus; rtps = one rustdds participant per agent over loopback UDP; all in one process";
 
-    // Figure 1: latency CDF per number of agents, all logs and seeds merged.
-    let mut by_agents: BTreeMap<u32, Vec<&RunResult>> = BTreeMap::new();
+    // Figure 1: latency CDF per transport and number of agents, all logs and seeds merged.
+    let mut by_agents: BTreeMap<(&str, u32), Vec<&RunResult>> = BTreeMap::new();
     for run in &results.replay {
-        by_agents.entry(run.agents).or_default().push(run);
+        by_agents.entry((&run.transport, run.agents)).or_default().push(run);
     }
     let series = by_agents
         .iter()
-        .map(|(n, runs)| Series {
-            name: format!("N = {n}"),
+        .map(|((transport, n), runs)| Series {
+            name: format!("{transport} N = {n}"),
             points: cdf_ms(&merged(runs.iter().copied(), |r| &r.latency_histogram)),
         })
         .collect();
@@ -99,7 +106,7 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
         y_label: "fraction of (write, receiver) pairs".into(),
         x_log: true,
         series,
-        footer: footer(inproc),
+        footer: footer(both),
         ..Chart::default()
     };
     figures::render(&chart, out, FIGURES[0])?;
@@ -134,39 +141,31 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
     };
     figures::render(&chart, out, FIGURES[1])?;
 
-    // Figure 3: bandwidth against number of agents, per log (mean over seeds).
-    let mut per_log: BTreeMap<&str, BTreeMap<u32, Vec<&RunResult>>> = BTreeMap::new();
-    for run in &results.replay {
-        per_log.entry(&run.workload).or_default().entry(run.agents).or_default().push(run);
+    // Figure 3: bandwidth against number of agents, on the first log (mean over seeds), per transport.
+    let first_log = results.set.logs.first().and_then(|l| l.path.file_name()).map(|n| n.to_string_lossy().into_owned());
+    let mut per_link: BTreeMap<&str, BTreeMap<u32, Vec<&RunResult>>> = BTreeMap::new();
+    for run in results.replay.iter().filter(|r| Some(&r.workload) == first_log.as_ref()) {
+        per_link.entry(&run.transport).or_default().entry(run.agents).or_default().push(run);
     }
-    let mean = |runs: &[&RunResult], f: fn(&RunResult) -> f64| {
+    let mean = |runs: &[&RunResult], f: &dyn Fn(&RunResult) -> f64| {
         runs.iter().map(|r| f(r)).sum::<f64>() / runs.len().max(1) as f64
     };
     let mut series = Vec::new();
-    for (log, by_n) in &per_log {
-        series.push(Series {
-            name: format!("sent, {log}"),
-            points: by_n
-                .iter()
-                .map(|(n, runs)| (f64::from(*n), mean(runs, |r| r.bandwidth.wire_bytes_per_second) / 1e6))
-                .collect(),
-        });
-    }
-    if let Some((log, by_n)) = per_log.iter().next() {
-        series.push(Series {
-            name: format!("received by all, {log}"),
-            points: by_n
-                .iter()
-                .map(|(n, runs)| (f64::from(*n), mean(runs, |r| r.bandwidth.received_bytes_per_second) / 1e6))
-                .collect(),
-        });
+    for (link, by_n) in &per_link {
+        let line = |name: &str, f: &dyn Fn(&RunResult) -> f64| Series {
+            name: format!("{link}: {name}"),
+            points: by_n.iter().map(|(n, runs)| (f64::from(*n), mean(runs, f) / 1e6)).collect(),
+        };
+        series.push(line("sent (transport counters)", &|r| r.bandwidth.wire_bytes_per_second));
+        series.push(line("received by all receivers", &|r| r.bandwidth.received_bytes_per_second));
+        series.push(line("loopback tx (OS counter)", &|r| r.bandwidth.loopback_tx_bytes_per_second.unwrap_or(0.0)));
     }
     let chart = Chart {
-        title: "Bytes per second against number of agents (transport counters)".into(),
+        title: format!("Bytes per second against number of agents, {}", first_log.unwrap_or_default()),
         x_label: "agents (the source included)".into(),
         y_label: "MB/s".into(),
         series,
-        footer: footer(inproc),
+        footer: footer(both),
         legend_upper_left: true,
         ..Chart::default()
     };
@@ -207,10 +206,12 @@ fn markdown(r: &Results) -> String {
     let _ = writeln!(md, "# Performance report: {} ({})\n", r.experiment, r.mode);
     let _ = writeln!(
         md,
-        "Generated by `cortex report`. Every run below is **in process**: the agents are replicas on their own threads \
-         joined by the in-process bus (`transport::inproc`), optionally behind the seeded fault injector; the partition \
-         runs use real agents (`agent::Agent`, with anti-entropy) on the same bus. **No figure here was measured over \
-         RTPS or with agents as separate processes.** Medians and percentiles of all runs, never a best run.\n"
+        "Generated by `cortex report`. Every run below is **in one process**: the agents are replicas on their own \
+         threads, joined by the in-process bus (`inproc`, `transport::inproc`) or by one RTPS participant each \
+         (`rtps`, `transport::rtps` on rustdds, loopback UDP), as each table and figure says; the fault runs use the \
+         in-process bus behind the seeded fault injector, and the partition runs real agents (`agent::Agent`, with \
+         anti-entropy) on the in-process bus. **No figure here was measured with agents as separate processes.** \
+         Medians and percentiles of all runs, never a best run.\n"
     );
     let _ = writeln!(md, "{}\n", SECTIONS[0]);
     let _ = writeln!(md, "| | |\n|---|---|");
@@ -236,35 +237,67 @@ fn markdown(r: &Results) -> String {
 
     // Comparison.
     let _ = writeln!(md, "{}\n", SECTIONS[1]);
-    let worst = r.replay.iter().max_by_key(|x| x.latency.p99_ns);
-    let worst_p99 = worst.map_or(0, |x| x.latency.p99_ns);
-    let worst_at = worst.map_or_else(String::new, |x| format!(" ({}, N={}, seed {})", x.workload, x.agents, x.seed));
-    let worst_max = r.replay.iter().map(|x| x.latency.max_ns).max().unwrap_or(0);
-    let worst_conv = r.replay.iter().map(|x| x.convergence.p99_ns).max().unwrap_or(0);
     let _ = writeln!(md, "| claim or figure | source | ours (this run) | verdict |\n|---|---|---|---|");
-    let _ = writeln!(
-        md,
-        "| latency below 50 ms \"for a wide range of configurations and payloads\" | DSR_d paper | worst p99 over every \
-         log and N: {:.2} ms{worst_at} (largest max {:.2} ms); worst per-write convergence p99 {:.2} ms | {} (in process only) |",
-        ms(worst_p99),
-        ms(worst_max),
-        ms(worst_conv),
-        if worst_p99 < 50_000_000 { "holds at p99" } else { "does not hold at p99" }
-    );
+    let mut links: Vec<&str> = r.replay.iter().map(|x| x.transport.as_str()).collect();
+    links.sort_unstable();
+    links.dedup();
+    for link in &links {
+        let runs = || r.replay.iter().filter(|x| x.transport == *link);
+        let worst = runs().max_by_key(|x| x.latency.p99_ns);
+        let worst_p99 = worst.map_or(0, |x| x.latency.p99_ns);
+        let worst_at =
+            worst.map_or_else(String::new, |x| format!(" ({}, N={}, seed {})", x.workload, x.agents, x.seed));
+        let worst_max = runs().map(|x| x.latency.max_ns).max().unwrap_or(0);
+        let worst_conv = runs().map(|x| x.convergence.p99_ns).max().unwrap_or(0);
+        let _ = writeln!(
+            md,
+            "| latency below 50 ms \"for a wide range of configurations and payloads\" | DSR_d paper | {link}: worst p99 \
+             over every log and N: {:.2} ms{worst_at}, largest max {:.2} ms; worst per-write convergence p99 {:.2} ms \
+             | {} ({link}, one process) |",
+            ms(worst_p99),
+            ms(worst_max),
+            ms(worst_conv),
+            if worst_p99 < 50_000_000 { "holds at p99" } else { "does not hold at p99" }
+        );
+    }
     let (n_lo, n_hi) =
         (r.set.agents.iter().min().copied().unwrap_or(0), r.set.agents.iter().max().copied().unwrap_or(0));
-    let bw = |n: u32| {
-        let runs: Vec<_> = r.replay.iter().filter(|x| x.agents == n).collect();
-        runs.iter().map(|x| x.bandwidth.wire_bytes_per_second).sum::<f64>() / 1e6
+    let first_log = r.set.logs.first().and_then(|l| l.path.file_name()).map(|n| n.to_string_lossy().into_owned());
+    let bw = |link: &str, n: u32, f: fn(&RunResult) -> Option<f64>| {
+        let values: Vec<f64> = r
+            .replay
+            .iter()
+            .filter(|x| x.transport == link && x.agents == n && Some(&x.workload) == first_log.as_ref())
+            .filter_map(f)
+            .collect();
+        (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64 / 1e6)
     };
-    let _ = writeln!(
-        md,
-        "| bandwidth constant in the number of agents (multicast) | DSR_d paper | bytes sent, all logs: {:.2} MB/s at N={n_lo}, \
-         {:.2} MB/s at N={n_hi} | not tested: the in-process bus hands one copy to all receivers, so this is constant by \
-         construction; the RTPS measurement is missing |",
-        bw(n_lo),
-        bw(n_hi)
-    );
+    let sent = |x: &RunResult| Some(x.bandwidth.wire_bytes_per_second);
+    let lo = |x: &RunResult| x.bandwidth.loopback_tx_bytes_per_second;
+    let log_name = first_log.clone().unwrap_or_default();
+    match (bw("rtps", n_lo, sent), bw("rtps", n_hi, sent), bw("rtps", n_lo, lo), bw("rtps", n_hi, lo)) {
+        (Some(s_lo), Some(s_hi), Some(l_lo), Some(l_hi)) => {
+            let growth = l_hi / l_lo.max(1e-9);
+            let _ = writeln!(
+                md,
+                "| bandwidth constant in the number of agents (multicast) | DSR_d paper | rtps, {log_name}: sent \
+                 (transport counters) {s_lo:.2} MB/s at N={n_lo}, {s_hi:.2} MB/s at N={n_hi}; loopback tx (OS) \
+                 {l_lo:.2} MB/s at N={n_lo}, {l_hi:.2} MB/s at N={n_hi} (x{growth:.1}) | {} |",
+                if growth < 1.5 {
+                    "holds on loopback (one process)"
+                } else {
+                    "does not hold: loopback traffic grows with N (one copy per reader, not multicast)"
+                }
+            );
+        }
+        _ => {
+            let _ = writeln!(
+                md,
+                "| bandwidth constant in the number of agents (multicast) | DSR_d paper | no RTPS runs in this set | \
+                 not tested (the in-process bus hands one copy to all receivers: constant by construction) |"
+            );
+        }
+    }
     let image_at = |size: usize| {
         r.set.payload.sizes.iter().position(|&s| s == size).and_then(|i| r.payload.get(i)).map(|x| x.latency)
     };
@@ -273,7 +306,7 @@ fn markdown(r: &Results) -> String {
             md,
             "| one-way latency, 360,960 B attribute at 20 Hz: N=1 reader p50 1.0–1.2 ms, p99 1.5–2.9 ms; N=6 p50 \
              2.0–2.2 ms, p99 5.1–5.9 ms | C++ (FastDDS, separate processes), measured elsewhere (FACTS.md) | \
-             360,960 B at {} Hz to {} receivers: p50 {:.3} ms, p99 {:.3} ms | not comparable yet (in process vs RTPS) |",
+             360,960 B at {} Hz to {} receivers: p50 {:.3} ms, p99 {:.3} ms | not comparable (in-process bus vs FastDDS processes) |",
             r.set.payload.rate_hz,
             r.set.payload.agents - 1,
             ms(l.p50_ns),
@@ -283,12 +316,13 @@ fn markdown(r: &Results) -> String {
     let _ = writeln!(
         md,
         "| bandwidth flat in N: 7.26 MB/s at N=1, 7.28 MB/s at N=6 (control traffic 1.5→40 KB/s) | C++ (FastDDS), \
-         measured elsewhere (FACTS.md) | — | RTPS bandwidth against N not measured yet |"
+         measured elsewhere (FACTS.md) | see the row above (rtps, one process) | compare the shape, not the values (other log, \
+         one process) |"
     );
     let _ = writeln!(
         md,
         "| wire cost of one small attribute update: ~443 B at 100 Hz | C++ (FastDDS), measured elsewhere (FACTS.md) | \
-         mean sample size of the Husky log (small updates): {} | in-process sample size (delta + 8 B), no RTPS headers |\n",
+         mean sample size of the Husky log (small updates): {} | sample size (delta + 8 B) without RTPS, UDP and IP headers |\n",
         r.replay
             .iter()
             .find(|x| x.workload.starts_with("husky"))
@@ -299,18 +333,11 @@ fn markdown(r: &Results) -> String {
     let _ = writeln!(md, "{}\n", SECTIONS[2]);
     figure(&mut md, FIGURES[0], "latency CDFs by number of agents");
     let _ = writeln!(md, "Every log and seed, per payload class (pairs of write and receiver):\n");
-    let _ = writeln!(md, "| log | N | seed | class | {PCT_HEAD} |\n|---|---:|---:|---|{PCT_RULE}|");
+    let _ = writeln!(md, "| log (transport) | N | seed | class | {PCT_HEAD} |\n|---|---:|---:|---|{PCT_RULE}|");
     for run in &r.replay {
         for (class, p) in &run.latency_by_class {
-            let _ = writeln!(
-                md,
-                "| {} | {} | {} | {} | {} |",
-                run.workload,
-                run.agents,
-                run.seed,
-                class.name(),
-                pct_row(p)
-            );
+            let _ =
+                writeln!(md, "| {} | {} | {} | {} | {} |", label(run), run.agents, run.seed, class.name(), pct_row(p));
         }
     }
     let _ = writeln!(md);
@@ -331,19 +358,21 @@ fn markdown(r: &Results) -> String {
         md,
         "Bytes per second of the publishing span, from the transports' counters (`TransportStats`). The OS-level \
          cross-check is the growth of the loopback interface's transmitted bytes (`/sys/class/net/lo/statistics/\
-         tx_bytes`) during the run: the in-process bus does not use the network, so it should be near zero (other \
-         processes on the machine add to it).\n"
+         tx_bytes`) from the first write until every receiver has everything: near zero for the in-process bus, which \
+         does not use the network (other processes on the machine add to it); for RTPS it includes \
+         acknowledgements, heartbeats and discovery, while the transport's own count is an estimate of data \
+         submessages and headers.\n"
     );
     let _ = writeln!(
         md,
-        "| log | N | seed | sent MB/s | received MB/s (all receivers) | per receiver MB/s | loopback tx bytes | dropped |\n|---|---:|---:|---:|---:|---:|---:|---:|"
+        "| log (transport) | N | seed | sent MB/s | received MB/s (all receivers) | per receiver MB/s | loopback tx bytes | dropped |\n|---|---:|---:|---:|---:|---:|---:|---:|"
     );
     for run in &r.replay {
         let b = &run.bandwidth;
         let _ = writeln!(
             md,
             "| {} | {} | {} | {:.3} | {:.3} | {:.3} | {} | {} |",
-            run.workload,
+            label(run),
             run.agents,
             run.seed,
             b.wire_bytes_per_second / 1e6,
@@ -374,7 +403,7 @@ fn markdown(r: &Results) -> String {
             md,
             "| {} ({}) | {} | {} | {} | {} | {} |",
             f.label,
-            x.workload,
+            label(x),
             x.agents,
             pct_row(&x.convergence),
             end(x),
@@ -386,7 +415,7 @@ fn markdown(r: &Results) -> String {
         let _ = writeln!(
             md,
             "| replay {} seed {} | {} | {} | {} | {} | 0 |",
-            x.workload,
+            label(x),
             x.seed,
             x.agents,
             pct_row(&x.convergence),
@@ -434,12 +463,13 @@ fn markdown(r: &Results) -> String {
     let _ = writeln!(
         md,
         "CPU time of each thread from `/proc/thread-self/schedstat`: the source while publishing (it mostly sleeps \
-         until writes are due) and each receiver (decoding and applying). The agents share one process, so memory is \
+         until writes are due) and each receiver (decoding and applying; for RTPS, the rustdds threads are not \
+         counted). The agents share one process, so memory is \
          the process's peak resident size (`VmHWM`) so far, not per agent.\n"
     );
     let _ = writeln!(
         md,
-        "| log | N | seed | source CPU ms | receiver CPU ms (mean) | receiver CPU % of span (mean) | process peak RSS MiB |\n|---|---:|---:|---:|---:|---:|---:|"
+        "| log (transport) | N | seed | source CPU ms | receiver CPU ms (mean) | receiver CPU % of span (mean) | process peak RSS MiB |\n|---|---:|---:|---:|---:|---:|---:|"
     );
     for x in &r.replay {
         let cpus: Vec<u64> = x.receiver_cpu_ns.iter().flatten().copied().collect();
@@ -447,7 +477,7 @@ fn markdown(r: &Results) -> String {
         let _ = writeln!(
             md,
             "| {} | {} | {} | {} | {:.1} | {:.1} | {} |",
-            x.workload,
+            label(x),
             x.agents,
             x.seed,
             x.source_cpu_ns.map_or_else(|| "?".to_owned(), |v| format!("{:.1}", ms(v))),
@@ -462,8 +492,8 @@ fn markdown(r: &Results) -> String {
     let _ = writeln!(md, "{}\n", SECTIONS[7]);
     let _ = writeln!(
         md,
-        "- Agents as separate processes over RTPS (`cortex agent`), hence real multicast bandwidth against N and the \
-         loopback cross-check of RTPS traffic; every figure above is in process.\n\
+        "- Agents as separate processes (`cortex agent`): the RTPS runs above put every participant in one process.\n\
+         - RTPS with the fault injector and RTPS partitions (faults and partitions run on the in-process bus).\n\
          - Per-agent memory (the in-process agents share one process).\n\
          - BICA statistics of the detector roles and the scheduler timeline of a detector under an injected overload.\n\
          - MCAP output of a run (metrics as JSON-schema channels, graph deltas) for Foxglove.\n"

@@ -26,17 +26,43 @@ use hdrhistogram::Histogram;
 use serde::Serialize;
 use transport::fault::{FaultConfig, FaultPlan};
 use transport::inproc::Bus;
+use transport::rtps::{RtpsConfig, RtpsTransport};
 use transport::{Channel, Clock, Transport, TransportStats};
 
 use crate::clock::MonoClock;
 use crate::latency::{self, LatencyRecorder, PayloadClass, Percentiles};
 use crate::workload::Workload;
 
-/// How an in-process experiment runs.
+/// How the endpoints of a run are connected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Link {
+    /// The in-process bus (`transport::inproc`): one copy handed to every inbox, no network.
+    #[default]
+    InProc,
+    /// One RTPS participant (`transport::rtps`, rustdds) per endpoint, all in this process, over loopback UDP.
+    Rtps {
+        /// DDS domain id (each run also takes topics of its own).
+        domain_id: u16,
+    },
+}
+
+impl Link {
+    /// `inproc` or `rtps`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Link::InProc => "inproc",
+            Link::Rtps { .. } => "rtps",
+        }
+    }
+}
+
+/// How an experiment runs.
 #[derive(Clone, Debug)]
 pub struct RunConfig {
     /// Agents, the source included (2 or more).
     pub agents: u32,
+    /// How the endpoints are connected.
+    pub link: Link,
     /// Seed of the fault injector.
     pub seed: u64,
     /// Faults applied to what each receiver receives (`None`: the bus alone).
@@ -49,7 +75,14 @@ pub struct RunConfig {
 
 impl Default for RunConfig {
     fn default() -> Self {
-        RunConfig { agents: 3, seed: 1, faults: None, inbox_capacity: 1 << 20, settle_timeout: Duration::from_secs(20) }
+        RunConfig {
+            agents: 3,
+            link: Link::InProc,
+            seed: 1,
+            faults: None,
+            inbox_capacity: 1 << 20,
+            settle_timeout: Duration::from_secs(20),
+        }
     }
 }
 
@@ -64,9 +97,12 @@ pub struct Bandwidth {
     pub wire_bytes_per_second: f64,
     /// Bytes received by all receivers together, per second of the publishing span.
     pub received_bytes_per_second: f64,
-    /// Growth of the loopback interface's transmitted bytes during the run (`/sys/class/net/lo`), if readable:
-    /// the OS-level cross-check (zero is expected in process: the in-process bus does not touch the network).
+    /// Growth of the loopback interface's transmitted bytes from the first publication until every receiver has
+    /// everything (`/sys/class/net/lo`), if readable: the OS-level cross-check. Near zero for the in-process bus
+    /// (other processes add to it); for RTPS it includes acknowledgements, heartbeats and discovery.
     pub loopback_tx_bytes: Option<u64>,
+    /// `loopback_tx_bytes` per second of the publishing span.
+    pub loopback_tx_bytes_per_second: Option<f64>,
     /// Samples dropped at full inboxes.
     pub dropped_full: u64,
     /// Samples dropped by the fault injector (loss, partitions).
@@ -80,7 +116,7 @@ pub struct Bandwidth {
 pub struct RunResult {
     /// The workload's name.
     pub workload: String,
-    /// `"inproc"` or `"inproc+faults"`.
+    /// `inproc` or `rtps`, with `+faults` when the fault injector is in the way.
     pub transport: String,
     /// Agents, the source included.
     pub agents: u32,
@@ -133,6 +169,13 @@ struct ReceiverOutcome {
     stats: TransportStats,
     cpu_ns: Option<u64>,
     replica: Replica,
+    probe_bytes: u64,
+}
+
+/// A number distinguishing runs of this process (topic names of RTPS runs).
+fn clock_id() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 /// CPU time of the calling thread in nanoseconds, from `/proc/thread-self/schedstat` (Linux).
@@ -155,6 +198,8 @@ pub fn peak_rss_bytes() -> Option<u64> {
 }
 
 const NOT_APPLIED: u64 = u64::MAX;
+/// Sequence number of the probes sent until every receiver hears the source (RTPS discovery).
+const PROBE: u64 = u64::MAX;
 
 fn receive(
     transport: Box<dyn Transport>,
@@ -162,18 +207,26 @@ fn receive(
     writes: usize,
     clock: MonoClock,
     applied: Arc<AtomicU64>,
+    probes: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
 ) -> ReceiverOutcome {
     let cpu_start = thread_cpu_ns();
     let mut applied_at = vec![NOT_APPLIED; writes];
     let mut refused = 0;
+    let mut probe_bytes = 0;
     while !stop.load(Ordering::Acquire) {
         let Some(sample) = transport.recv_timeout(Duration::from_millis(2)) else { continue };
         let Some((header, body)) = sample.bytes.split_first_chunk::<8>() else {
             refused += 1;
             continue;
         };
-        let seq = u64::from_le_bytes(*header) as usize;
+        let seq = u64::from_le_bytes(*header);
+        if seq == PROBE {
+            probe_bytes += sample.bytes.len() as u64;
+            probes.fetch_add(1, Ordering::Release);
+            continue;
+        }
+        let seq = seq as usize;
         let ok = Delta::decode(body).ok().and_then(|delta| replica.apply(&delta).ok()).is_some();
         let now = clock.now_ns();
         match applied_at.get_mut(seq) {
@@ -187,7 +240,7 @@ fn receive(
         }
     }
     let cpu_ns = cpu_start.zip(thread_cpu_ns()).map(|(a, b)| b.saturating_sub(a));
-    ReceiverOutcome { applied_at, refused, stats: transport.stats(), cpu_ns, replica }
+    ReceiverOutcome { applied_at, refused, stats: transport.stats(), cpu_ns, replica, probe_bytes }
 }
 
 /// Runs `workload` from one source to `config.agents - 1` receivers over the in-process bus and measures it.
@@ -199,27 +252,45 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
     let clock = MonoClock::start();
     let bus = Bus::new();
     let plan = config.faults.map(|faults| FaultPlan::new(config.seed, faults));
-    let endpoint = |bus: &Bus| -> Box<dyn Transport> {
-        let inner = bus.attach(config.inbox_capacity);
-        match &plan {
-            Some(plan) => Box::new(plan.wrap(inner, Arc::new(clock) as Arc<dyn Clock>)),
-            None => Box::new(inner),
+    let topic_prefix = format!("measure{}_{}_{}", std::process::id(), config.agents, clock_id());
+    let endpoint = |bus: &Bus| -> anyhow::Result<Box<dyn Transport>> {
+        fn wrap<T: Transport + 'static>(plan: &Option<FaultPlan>, inner: T, clock: MonoClock) -> Box<dyn Transport> {
+            match plan {
+                Some(plan) => Box::new(plan.wrap(inner, Arc::new(clock) as Arc<dyn Clock>)),
+                None => Box::new(inner),
+            }
         }
+        Ok(match config.link {
+            Link::InProc => wrap(&plan, bus.attach(config.inbox_capacity), clock),
+            Link::Rtps { domain_id } => {
+                let rtps = RtpsTransport::new(RtpsConfig {
+                    domain_id,
+                    topic_prefix: topic_prefix.clone(),
+                    inbox_capacity: config.inbox_capacity.min(1 << 16),
+                    ..RtpsConfig::default()
+                })
+                .context("cannot create an RTPS participant")?;
+                wrap(&plan, rtps, clock)
+            }
+        })
     };
-    let source = endpoint(&bus);
+    let source = endpoint(&bus)?;
     let n = workload.writes.len();
     let stop = Arc::new(AtomicBool::new(false));
     let mut counters = Vec::new();
+    let mut probe_counters = Vec::new();
     let mut threads = Vec::new();
     for i in 0..config.agents - 1 {
-        let transport = endpoint(&bus);
+        let transport = endpoint(&bus)?;
         let replica = Replica::with_dictionary(ReplicaId(2 + i), workload.dictionary.clone());
         let applied = Arc::new(AtomicU64::new(0));
         counters.push(Arc::clone(&applied));
+        let probes = Arc::new(AtomicU64::new(0));
+        probe_counters.push(Arc::clone(&probes));
         let stop = Arc::clone(&stop);
         let handle = std::thread::Builder::new()
             .name(format!("receiver-{}", i + 2))
-            .spawn(move || receive(transport, replica, n, clock, applied, stop))
+            .spawn(move || receive(transport, replica, n, clock, applied, probes, stop))
             .context("cannot start a receiver thread")?;
         threads.push(handle);
     }
@@ -236,7 +307,20 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
         })
         .collect();
     let sample_bytes = samples.iter().map(|s| s.len() as u64).sum();
+    // Probes until every receiver hears the source: RTPS discovery takes a while, and a reliable volatile reader
+    // matched late would miss the first writes.
+    let heard = || probe_counters.iter().all(|c| c.load(Ordering::Acquire) > 0);
+    let probe_deadline = clock.now_ns() + 30_000_000_000;
+    while !heard() {
+        if clock.now_ns() > probe_deadline {
+            stop.store(true, Ordering::Release);
+            anyhow::bail!("the receivers did not hear the source within 30 s ({})", config.link.name());
+        }
+        source.publish(Channel::Updates, Bytes::copy_from_slice(&PROBE.to_le_bytes())).context("probe")?;
+        std::thread::sleep(Duration::from_millis(20));
+    }
     std::thread::sleep(Duration::from_millis(20));
+    let source_before = source.stats();
     let lo_before = loopback_tx_bytes();
     let cpu_before = thread_cpu_ns();
     let start = clock.now_ns();
@@ -297,21 +381,25 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
         .unwrap_or(last_publish);
     let span_s = (last_publish.saturating_sub(start) as f64 / 1e9).max(1e-3);
     let source_stats = source.stats();
-    let received: Vec<u64> = outcomes.iter().map(|o| o.stats.payload_bytes_received).collect();
-    let wire_sent = source_stats.wire_bytes_sent + outcomes.iter().map(|o| o.stats.wire_bytes_sent).sum::<u64>();
+    let source_wire = source_stats.wire_bytes_sent - source_before.wire_bytes_sent;
+    let received: Vec<u64> =
+        outcomes.iter().map(|o| o.stats.payload_bytes_received.saturating_sub(o.probe_bytes)).collect();
+    let wire_sent = source_wire + outcomes.iter().map(|o| o.stats.wire_bytes_sent).sum::<u64>();
+    let loopback = lo_before.zip(lo_after).map(|(a, b)| b.saturating_sub(a));
     let bandwidth = Bandwidth {
-        source_wire_bytes: source_stats.wire_bytes_sent,
+        source_wire_bytes: source_wire,
         wire_bytes_per_second: wire_sent as f64 / span_s,
         received_bytes_per_second: received.iter().sum::<u64>() as f64 / span_s,
         received_bytes: received,
-        loopback_tx_bytes: lo_before.zip(lo_after).map(|(a, b)| b.saturating_sub(a)),
+        loopback_tx_bytes: loopback,
+        loopback_tx_bytes_per_second: loopback.map(|b| b as f64 / span_s),
         dropped_full: outcomes.iter().map(|o| o.stats.dropped_full).sum(),
         injected_drops: outcomes.iter().map(|o| o.stats.dropped_injected).sum(),
         injected_duplicates: outcomes.iter().map(|o| o.stats.duplicated_injected).sum(),
     };
     Ok(RunResult {
         workload: workload.name.clone(),
-        transport: if config.faults.is_some() { "inproc+faults" } else { "inproc" }.to_owned(),
+        transport: format!("{}{}", config.link.name(), if config.faults.is_some() { "+faults" } else { "" }),
         agents: config.agents,
         seed: config.seed,
         writes: sent_at.len() as u64,
@@ -353,6 +441,19 @@ mod tests {
         assert_eq!(result.bandwidth.source_wire_bytes, result.sample_bytes);
         assert_eq!(result.bandwidth.received_bytes, vec![result.sample_bytes; 3]);
         assert!(result.convergence.max_ns <= result.latency.max_ns);
+    }
+
+    #[test]
+    fn rtps_participants_in_one_process_deliver_every_write() {
+        let workload = synthetic(100_000, 200.0, 20, 9).unwrap();
+        let config = RunConfig { agents: 3, link: Link::Rtps { domain_id: 71 }, ..RunConfig::default() };
+        let result = run(&workload, &config).unwrap();
+        assert_eq!(result.transport, "rtps");
+        assert_eq!(result.writes_not_everywhere, 0, "{result:?}");
+        assert!(result.digests_equal);
+        // The RTPS layer's estimate adds headers to every sample.
+        assert!(result.bandwidth.source_wire_bytes > result.sample_bytes);
+        assert_eq!(result.bandwidth.received_bytes, vec![result.sample_bytes; 2]);
     }
 
     #[test]
