@@ -130,6 +130,16 @@ pub struct Provenance {
     pub datasets: Vec<DatasetChecksum>,
 }
 
+/// The command line, with the program named by its file name only (`cortex report ...`), not by the path of the
+/// build directory it ran from.
+fn command_line() -> String {
+    let mut args = std::env::args();
+    let program = args.next().map_or_else(String::new, |p| {
+        Path::new(&p).file_name().map_or(p.clone(), |n| n.to_string_lossy().into_owned())
+    });
+    std::iter::once(program).chain(args).collect::<Vec<_>>().join(" ")
+}
+
 fn output(program: &str, args: &[&str]) -> Option<String> {
     let out = Command::new(program).args(args).output().ok()?;
     out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_owned())
@@ -147,7 +157,7 @@ impl Provenance {
             rustc: output("rustc", &["--version"]).unwrap_or_else(|| "unknown".to_owned()),
             release_build: !cfg!(debug_assertions),
             machine: Machine::current(),
-            command: std::env::args().collect::<Vec<_>>().join(" "),
+            command: command_line(),
             started_unix_s: std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0, |d| d.as_secs()),
