@@ -81,7 +81,8 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
         vec![
             format!("command: {}   commit {}   {}", p.command, p.short_commit(), p.rustc),
             format!("machine: {}", p.machine.summary()),
-            format!("transport: {transport}   seeds: {seeds}"),
+            format!("transport: {transport}"),
+            format!("seeds: {seeds}"),
         ]
     };
     let inproc = "in-process bus (transport::inproc), receivers on their own threads, one process";
