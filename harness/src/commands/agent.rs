@@ -89,20 +89,35 @@ pub enum Role {
     FixtureCamera,
 }
 
-/// Runs `cortex agent`.
-pub fn run(args: AgentArgs) -> Result<()> {
-    if args.id >= AgentId::LIMIT {
-        bail!("--id {} is out of range (0..{})", args.id, AgentId::LIMIT);
+/// Starts an agent on RTPS with the real clock: the way `cortex agent` and `cortex inspect` join a graph.
+///
+/// # Errors
+/// An unreadable or invalid seed graph, or a DDS domain that cannot be joined.
+pub fn start_rtps_agent(
+    id: u32,
+    join_wait_ms: u64,
+    seed_json: Option<&std::path::Path>,
+    domain: u16,
+    topic_prefix: &str,
+) -> Result<Arc<Agent<RtpsTransport>>> {
+    if id >= AgentId::LIMIT {
+        bail!("--id {id} is out of range (0..{})", AgentId::LIMIT);
     }
-    let mut config = AgentConfig::new(AgentId(args.id));
-    config.join_wait = Duration::from_millis(args.join_wait_ms);
-    if let Some(path) = &args.seed_json {
+    let mut config = AgentConfig::new(AgentId(id));
+    config.join_wait = Duration::from_millis(join_wait_ms);
+    if let Some(path) = seed_json {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
     }
-    let rtps = RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() };
+    let rtps = RtpsConfig { domain_id: domain, topic_prefix: topic_prefix.to_owned(), ..RtpsConfig::default() };
     let transport = RtpsTransport::new(rtps).context("joining the DDS domain")?;
-    let agent = Arc::new(Agent::start(config, transport, Arc::new(SystemClock))?);
+    Ok(Arc::new(Agent::start(config, transport, Arc::new(SystemClock))?))
+}
+
+/// Runs `cortex agent`.
+pub fn run(args: AgentArgs) -> Result<()> {
+    let agent =
+        start_rtps_agent(args.id, args.join_wait_ms, args.seed_json.as_deref(), args.domain, &args.topic_prefix)?;
     let driver = match args.role {
         Some(role) => {
             if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {

@@ -10,14 +10,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use agent::{Agent, AgentConfig, AgentId};
+use agent::AgentId;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use inspector::debug::{DebugSource, RemoteDebug};
 use inspector::feed::GraphFeed;
 use inspector::{Inspector, InspectorConfig};
-use transport::SystemClock;
-use transport::rtps::{RtpsConfig, RtpsTransport};
 
 /// Arguments of `cortex inspect`.
 #[derive(Debug, Args)]
@@ -67,15 +65,13 @@ pub fn run(args: InspectArgs) -> Result<()> {
             args.listen
         );
     }
-    let mut config = AgentConfig::new(AgentId(args.id));
-    config.join_wait = Duration::from_millis(args.join_wait_ms);
-    if let Some(path) = &args.seed_json {
-        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
-    }
-    let rtps = RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() };
-    let transport = RtpsTransport::new(rtps).context("joining the DDS domain")?;
-    let agent = Arc::new(Agent::start(config, transport, Arc::new(SystemClock))?);
+    let agent = super::agent::start_rtps_agent(
+        args.id,
+        args.join_wait_ms,
+        args.seed_json.as_deref(),
+        args.domain,
+        &args.topic_prefix,
+    )?;
     let feed: Arc<dyn GraphFeed> = agent.clone();
     let mut demo = None;
     let mut debug: Option<Arc<dyn DebugSource>> = None;

@@ -180,11 +180,14 @@ impl Browser {
         self.cmd("POST", "/execute/sync", Some(&json!({"script": script, "args": []})))
     }
 
-    /// Polls `script` (which returns a boolean) until true or `limit` passes; returns the time it took.
+    /// Polls `script` (which returns a boolean) until true or `limit` passes; returns the time it took. A script
+    /// error counts as "not yet": the page may not have defined what the script reads (CI saw
+    /// `window.inspector` still undefined on the first poll).
     fn wait_for(&self, script: &str, limit: Duration) -> Option<Duration> {
+        let guarded = format!("try {{ {script} }} catch (error) {{ return false; }}");
         let start = Instant::now();
         while start.elapsed() < limit {
-            if self.js(script) == Value::Bool(true) {
+            if self.js(&guarded) == Value::Bool(true) {
                 return Some(start.elapsed());
             }
             std::thread::sleep(Duration::from_millis(20));
