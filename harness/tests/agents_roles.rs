@@ -138,3 +138,27 @@ fn get_json(addr: &str, path: &str) -> serde_json::Value {
     let body = response.split_once("\r\n\r\n").map(|(_, body)| body).expect(&response);
     serde_json::from_str(body).unwrap_or_else(|e| panic!("{path}: {e}: {body}"))
 }
+
+/// The `bridge` role: one process replays the bundled EuRoC cut (camera, IMU, pose, TF) into its graph through the
+/// replay bridge; a plain agent process receives the sensor nodes and the camera images over RTPS.
+#[test]
+fn a_bridge_process_replays_a_log_into_another_agents_graph() {
+    let prefix = format!("bridge{}", std::process::id());
+    let log = concat!(env!("CARGO_MANIFEST_DIR"), "/../datasets/logs/euroc_v1_01_easy_cam0_1s.mcap");
+    let (tx, rx) = mpsc::channel();
+    let bridge_args = ["--role", "bridge", "--log", log, "--rate", "max", "--loops", "3", "--join-wait-ms", "500"];
+    let _bridge = spawn(1, &prefix, &bridge_args, tx.clone());
+    let _receiver = spawn(2, &prefix, &["--join-wait-ms", "60000"], tx);
+
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let (id, status) = rx.recv_timeout(left).expect("the bridged sensors never reached agent 2 within 60 s");
+        let count = |node_type: &str| status["node_types"][node_type].as_u64().unwrap_or(0);
+        if id == 2 && count("camera") >= 2 && count("imu") >= 1 && count("pose") >= 1 {
+            // Camera images and camera info are two topics, hence two camera nodes; TF frames are transforms.
+            assert!(count("transform") >= 1, "TF frames arrive as transform nodes: {status}");
+            break;
+        }
+    }
+}

@@ -67,6 +67,15 @@ pub struct AgentArgs {
     /// Run this BICA role on the agent's graph and serve its runtime's methods to other agents.
     #[arg(long, value_enum)]
     pub role: Option<Role>,
+    /// The log the `bridge` role replays.
+    #[arg(long, required_if_eq("role", "bridge"))]
+    pub log: Option<PathBuf>,
+    /// Replay rate of the `bridge` role: `max`, or a factor of the recorded timing (2 plays twice as fast).
+    #[arg(long, default_value = "1")]
+    pub rate: replay::Rate,
+    /// How many times the `bridge` role plays its log.
+    #[arg(long, default_value_t = 1)]
+    pub loops: u32,
     /// The role's node: the camera (camera-detector, fixture-camera), the laser (laser-detector) or the head
     /// (attention).
     #[arg(long, default_value = "cam0")]
@@ -87,6 +96,8 @@ pub enum Role {
     Attention,
     /// Writes the bundled EuRoC frames into the camera node (inserted if missing), each frame 5 times in a row.
     FixtureCamera,
+    /// Replays a ROS 2 MCAP log (`--log`) into the graph through the replay bridge: a node per topic, TF as RT edges.
+    Bridge,
 }
 
 /// Starts an agent on RTPS with the real clock: the way `cortex agent` and `cortex inspect` join a graph.
@@ -118,7 +129,18 @@ pub fn start_rtps_agent(
 pub fn run(args: AgentArgs) -> Result<()> {
     let agent =
         start_rtps_agent(args.id, args.join_wait_ms, args.seed_json.as_deref(), args.domain, &args.topic_prefix)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut player = None;
     let driver = match args.role {
+        Some(Role::Bridge) => {
+            if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {
+                bail!("agent {} got no graph in time to start the bridge", args.id);
+            }
+            let log = args.log.clone().context("the bridge role needs --log FILE.mcap")?;
+            let (agent, stop, rate, loops) = (Arc::clone(&agent), Arc::clone(&stop), args.rate, args.loops);
+            player = Some(std::thread::spawn(move || play_log(&agent, &log, rate, loops, &stop)));
+            None
+        }
         Some(role) => {
             if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {
                 bail!("agent {} got no graph in time to start role {role:?}", args.id);
@@ -130,7 +152,6 @@ pub fn run(args: AgentArgs) -> Result<()> {
         None => None,
     };
 
-    let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = Arc::clone(&stop);
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
@@ -158,6 +179,17 @@ pub fn run(args: AgentArgs) -> Result<()> {
     if let Some(driver) = driver {
         agent.stop_serving_calls();
         driver.stop().context("stopping the role's runtime")?;
+    }
+    if let Some(player) = player {
+        stop.store(true, Ordering::SeqCst);
+        let stats = player.join().map_err(|_| anyhow!("the bridge thread panicked"))??;
+        eprintln!(
+            "bridge: {} messages bridged, {} unknown, {} filtered, {} errors",
+            stats.messages,
+            stats.unknown.values().sum::<u64>(),
+            stats.filtered,
+            stats.error_count()
+        );
     }
     agent.shutdown();
     if args.json_status {
@@ -199,6 +231,36 @@ fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> s
     })
 }
 
+/// The `bridge` role: paces a log on the monotonic clock and writes each message into the agent's graph through
+/// `replay::Bridge` (the agent publishes the deltas), until the log ends or `stop` is set.
+fn play_log(
+    agent: &Agent<RtpsTransport>,
+    path: &std::path::Path,
+    rate: replay::Rate,
+    loops: u32,
+    stop: &AtomicBool,
+) -> Result<replay::BridgeStats> {
+    let log = replay::Log::open(path, replay::ReadOptions::default())
+        .with_context(|| format!("cannot replay {}", path.display()))?;
+    let mut bridge = replay::Bridge::new(replay::BridgeOptions::default());
+    let origin = Instant::now();
+    let clock = move || origin.elapsed().as_nanos() as u64;
+    for item in replay::Pacer::new(&log.messages, rate, loops, clock) {
+        loop {
+            if stop.load(Ordering::SeqCst) {
+                return Ok(bridge.stats().clone());
+            }
+            let now = clock();
+            if now >= item.due_ns {
+                break;
+            }
+            std::thread::sleep(Duration::from_nanos(item.due_ns - now).min(Duration::from_millis(50)));
+        }
+        agent.update(|replica, now_ns| ((), bridge.ingest(replica, now_ns, item.message, item.shift_ns)))?;
+    }
+    Ok(bridge.stats().clone())
+}
+
 fn ms(period_ms: u64) -> u64 {
     period_ms.max(1) * 1_000_000
 }
@@ -210,6 +272,9 @@ fn start_role(
     sensor: &str,
     period_ms: u64,
 ) -> Result<(Driver, Service)> {
+    if role == Role::Bridge {
+        bail!("the bridge role runs no BICA tree (it is a log player)");
+    }
     let frames = match role {
         Role::FixtureCamera => perception::fixtures::euroc_frames().context("reading the EuRoC fixtures")?,
         _ => Vec::new(),
@@ -239,6 +304,7 @@ fn start_role(
                     .register(FixtureCamera { graph, name: sensor, node: None, frames, written: 0 }, ms(period_ms))?;
                 return runtime.activate::<FixtureCamera>();
             }
+            Role::Bridge => return Err(failed("the bridge role runs no BICA tree".into())),
         };
         built.map_err(|e| failed(e.to_string()))
     })
@@ -255,6 +321,7 @@ fn start_role(
             .method("LaserReader.readings", |r: &mut LaserReader, (): ()| r.readings()),
         Role::Attention => methods.method("Scanner.runs", |s: &mut Scanner, (): ()| s.runs()),
         Role::FixtureCamera => methods.method("FixtureCamera.written", |c: &mut FixtureCamera, (): ()| c.written),
+        Role::Bridge => methods,
     };
     let service = methods.build(driver.remote());
     Ok((driver, service))

@@ -533,6 +533,16 @@ impl<T: Transport + 'static> Agent<T> {
         Ok(result)
     }
 
+    /// Runs several local operations at once on the agent's replica (a log bridge, a batch import) and publishes
+    /// every delta `op` returns, after the lock is released. `op` gets the replica and the agent clock's `now_ns`;
+    /// keep it short: it holds the lock readers wait on.
+    ///
+    /// # Errors
+    /// [`AgentError`]: not joined, or an id collision.
+    pub fn update<R>(&self, op: impl FnOnce(&mut Replica, u64) -> (R, Vec<Arc<Delta>>)) -> Result<R, AgentError> {
+        self.write_deltas(|replica, now| Ok(op(replica, now)))
+    }
+
     /// Inserts a node; returns its id.
     ///
     /// # Errors

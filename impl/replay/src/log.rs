@@ -32,11 +32,11 @@ pub const DEFAULT_MAX_CHUNK_BYTES: u64 = 1 << 30;
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
     /// The file could not be opened or mapped.
-    #[error("cannot open {path}: {source}")]
+    #[error("cannot open {path}")]
     Open {
         /// The path given.
         path: String,
-        /// The operating system's error.
+        /// The operating system's error (printed by error chains, so not repeated in the message).
         #[source]
         source: std::io::Error,
     },
