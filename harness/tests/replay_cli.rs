@@ -46,7 +46,7 @@ fn damaged_files_and_unsupported_transport_are_errors() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("replaying the 0 messages read before it"));
     let out = cortex(&["replay", &repo("datasets/logs/ouster_os1-128_1scan.mcap"), "--transport", "rtps"]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("arrive with the agents issue"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--role bridge"));
 }
 
 #[test]

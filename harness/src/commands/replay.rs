@@ -5,8 +5,8 @@
 //! `--recover`, the end of what is replayed); messages are paced at the recorded timing divided by `--rate` (or as
 //! fast as possible with `--rate max`) and looped `--loop` times; the bridge writes them into its replica and its
 //! deltas go to the other agents. With `--transport inproc` the agents are replicas in this process joined by the
-//! seeded in-memory delivery of `replay::inproc`; `--transport rtps` (agents as processes) arrives with the agents
-//! issue and is refused until then. The summary gives messages by type, unknown and skipped ones, bytes, deltas,
+//! seeded in-memory delivery of `replay::inproc`; `--transport rtps` is refused with a pointer to `cortex agent
+//! --role bridge`, which plays a log into agent processes over RTPS (this command does not start processes yet). The summary gives messages by type, unknown and skipped ones, bytes, deltas,
 //! throughput and whether the final digests are equal (exit code 1 if they are not).
 
 use std::collections::BTreeMap;
@@ -27,7 +27,7 @@ use serde::Serialize;
 pub enum Transport {
     /// Replicas in this process, seeded in-memory delivery.
     Inproc,
-    /// Agents as processes over RTPS (arrives with the agents issue).
+    /// Agents as processes over RTPS: refused here; use `cortex agent --role bridge`.
     Rtps,
 }
 
@@ -100,7 +100,8 @@ struct Summary {
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     if args.transport == Transport::Rtps {
         bail!(
-            "--transport rtps needs the agents as processes, which arrive with the agents issue (5); use --transport inproc"
+            "cortex replay runs its agents in process (--transport inproc); to play a log into agents over RTPS, run \
+             `cortex agent --id N --role bridge --log FILE.mcap` beside the other agent processes"
         );
     }
     if !(1..=64).contains(&args.agents) {
