@@ -722,7 +722,11 @@ impl Replica {
                     self.dictionary
                         .peek_attr(name, ty)
                         .map_err(|source| DeltaError::Dictionary { place: place(), source })?;
-                    // Two values of different types for one unknown name within a delta is a conflict too.
+                    // Two values of different types for one unknown name within a delta is a conflict too (a known
+                    // name's type was just checked, so only unknown names need remembering).
+                    if self.dictionary.attr_type(name).is_some() {
+                        continue;
+                    }
                     if let Some(first) = first_types.insert(name.clone(), ty).filter(|first| *first != ty) {
                         return Err(DeltaError::Dictionary {
                             place: place(),
@@ -779,7 +783,6 @@ impl Replica {
             }
         }
 
-        let mut changed_attrs: SmallVec<[Name; 2]> = SmallVec::new();
         for (id, theirs) in &delta.store.nodes {
             if self.store.tombstones.contains(id) {
                 continue;
@@ -788,16 +791,7 @@ impl Replica {
             if mine.core.join(&theirs.core, &self.ctx, &delta.ctx, plant) {
                 names_to_reindex.push(*id);
             }
-            changed_attrs.clear();
-            join_attrs(
-                &mut mine.attrs,
-                &theirs.attrs,
-                &self.ctx,
-                &delta.ctx,
-                delta.complete,
-                plant,
-                &mut changed_attrs,
-            );
+            join_attrs(&mut mine.attrs, &theirs.attrs, &self.ctx, &delta.ctx, delta.complete, plant);
             if mine.is_empty() {
                 self.store.nodes.remove(id);
             }
@@ -808,8 +802,7 @@ impl Replica {
                     if mine.core.drop_covered(&delta.ctx) {
                         names_to_reindex.push(*id);
                     }
-                    changed_attrs.clear();
-                    drop_covered_attrs(&mut mine.attrs, &delta.ctx, &mut changed_attrs);
+                    drop_covered_attrs(&mut mine.attrs, &delta.ctx);
                 }
             }
             self.store.nodes.retain(|_, node| !node.is_empty());
@@ -823,16 +816,7 @@ impl Replica {
             let existed = self.store.edges.contains_key(key);
             let mine = self.store.edges.entry(key.clone()).or_default();
             mine.presence.join(&theirs.presence, &self.ctx, &delta.ctx, plant);
-            changed_attrs.clear();
-            join_attrs(
-                &mut mine.attrs,
-                &theirs.attrs,
-                &self.ctx,
-                &delta.ctx,
-                delta.complete,
-                plant,
-                &mut changed_attrs,
-            );
+            join_attrs(&mut mine.attrs, &theirs.attrs, &self.ctx, &delta.ctx, delta.complete, plant);
             let exists = !mine.is_empty();
             if !exists {
                 self.store.edges.remove(key);
@@ -845,8 +829,7 @@ impl Replica {
             for (key, mine) in self.store.edges.iter_mut() {
                 if !delta.store.edges.contains_key(key) {
                     mine.presence.drop_covered(&delta.ctx);
-                    changed_attrs.clear();
-                    drop_covered_attrs(&mut mine.attrs, &delta.ctx, &mut changed_attrs);
+                    drop_covered_attrs(&mut mine.attrs, &delta.ctx);
                     if mine.is_empty() {
                         edges_to_reindex.push(key.clone());
                     }

@@ -191,7 +191,7 @@ impl EdgeEntry {
 }
 
 /// Joins attribute registers; `complete` says `other` lists every register it has (a full state), so registers
-/// missing from it are joined with an empty register too. Returns the names whose registers changed.
+/// missing from it are joined with an empty register too.
 pub(crate) fn join_attrs(
     mine: &mut Attrs,
     theirs: &Attrs,
@@ -199,24 +199,31 @@ pub(crate) fn join_attrs(
     other_ctx: &CausalContext,
     complete: bool,
     plant: Plant,
-    changed: &mut SmallVec<[Name; 2]>,
 ) {
     for (name, register) in theirs {
-        let slot = mine.entry(name.clone()).or_default();
-        if slot.join(register, self_ctx, other_ctx, plant) {
-            changed.push(name.clone());
-        }
-        if slot.is_empty() {
+        // The common case (the register exists) costs no name clone.
+        let emptied = match mine.get_mut(name) {
+            Some(slot) => {
+                slot.join(register, self_ctx, other_ctx, plant);
+                slot.is_empty()
+            }
+            None => {
+                let mut slot = Register::default();
+                slot.join(register, self_ctx, other_ctx, plant);
+                if !slot.is_empty() {
+                    mine.insert(name.clone(), slot);
+                }
+                false
+            }
+        };
+        if emptied {
             mine.remove(name);
         }
     }
     if complete {
         mine.retain(|name, register| {
-            if theirs.contains_key(name) {
-                return true;
-            }
-            if register.drop_covered(other_ctx) {
-                changed.push(name.clone());
+            if !theirs.contains_key(name) {
+                register.drop_covered(other_ctx);
             }
             !register.is_empty()
         });
@@ -224,11 +231,9 @@ pub(crate) fn join_attrs(
 }
 
 /// Drops every dot `ctx` covers from attribute registers (the join with an absent entry of a full state).
-pub(crate) fn drop_covered_attrs(mine: &mut Attrs, ctx: &CausalContext, changed: &mut SmallVec<[Name; 2]>) {
-    mine.retain(|name, register| {
-        if register.drop_covered(ctx) {
-            changed.push(name.clone());
-        }
+pub(crate) fn drop_covered_attrs(mine: &mut Attrs, ctx: &CausalContext) {
+    mine.retain(|_, register| {
+        register.drop_covered(ctx);
         !register.is_empty()
     });
 }
