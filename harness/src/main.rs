@@ -38,6 +38,9 @@ enum Command {
     Inspect(commands::inspect::InspectArgs),
     /// Run an experiment set and write a report (results.json, figures, report.md).
     Report(commands::report::ReportArgs),
+    /// A receiver process of a measured run (started by `cortex report`).
+    #[command(hide = true)]
+    MeasureReceiver(commands::receiver::ReceiverArgs),
 }
 
 fn main() -> ExitCode {
@@ -51,6 +54,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => commands::bench::run(args),
         Command::Inspect(args) => commands::inspect::run(args),
         Command::Report(args) => commands::report::run(args),
+        Command::MeasureReceiver(args) => commands::receiver::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -24,14 +24,18 @@ fn tiny_set(euroc: &str, sick: &str) -> String {
     format!(
         r#"agents = [2, 3]
 seeds = [7]
+transports = ["inproc", "rtps-processes"]
+rtps_domain = 76
 logs = [{{ path = "{sick}", rate = "20" }}, {{ path = "{euroc}", rate = "4" }}]
 [payload]
 sizes = [16, 65536]
 rate_hz = 200
 count = 5
 agents = 3
+transport = "rtps-processes"
 [faults]
 agents = 3
+transports = ["inproc", "rtps-processes"]
 log = {{ path = "{euroc}", rate = "4" }}
 variants = [{{ label = "no faults" }}, {{ label = "delayed", delay_ms = [0.0, 1.0], duplicate = 0.1 }}]
 [partition]
@@ -78,15 +82,29 @@ fn tiny_report_has_every_figure_and_section() {
     for stem in measure::report::FIGURES {
         assert!(report.contains(&format!("]({stem}.svg)")), "report.md does not show {stem}");
     }
-    assert!(report.contains("No figure here was measured with agents as separate processes"));
+    assert!(report.contains("**every receiver is a separate process**"));
+    assert!(report.contains("rtps-processes"));
     assert!(report.contains("measured elsewhere"));
 
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     assert_eq!(results["provenance"]["schema_version"], measure::SCHEMA_VERSION);
     assert_eq!(results["mode"], "quick");
-    assert_eq!(results["replay"].as_array().unwrap().len(), 4, "2 logs x 2 agent counts x 1 seed");
-    assert!(results["replay"].as_array().unwrap().iter().all(|r| r["digests_equal"] == true));
+    let replay = results["replay"].as_array().unwrap();
+    assert_eq!(replay.len(), 8, "2 logs x 2 transports x 2 agent counts x 1 seed");
+    assert!(replay.iter().all(|r| r["digests_equal"] == true && r["writes_not_everywhere"] == 0));
+    let processes: Vec<_> = replay.iter().filter(|r| r["transport"] == "rtps-processes").collect();
+    assert_eq!(processes.len(), 4);
+    for run in processes {
+        let costs = run["agent_costs"].as_array().unwrap();
+        assert_eq!(costs.len() as u64, run["agents"].as_u64().unwrap());
+        assert!(costs[1..].iter().all(|c| c["kind"] == "process" && c["peak_rss_bytes"].as_u64().unwrap() > 0));
+    }
+    let faults = results["faults"].as_array().unwrap();
+    assert_eq!(faults.len(), 4, "2 variants x 2 transports");
+    assert!(faults.iter().any(|f| f["run"]["transport"] == "rtps-processes+faults"));
+    assert!(faults.iter().all(|f| f["run"]["digests_equal"] == true));
+    assert!(results["payload"].as_array().unwrap().iter().all(|r| r["transport"] == "rtps-processes"));
     assert_eq!(results["provenance"]["datasets"].as_array().unwrap().len(), 2);
     assert!(results["provenance"]["datasets"].as_array().unwrap().iter().all(|d| d["sha256"] == d["manifest_sha256"]));
     assert!(results["partition"][0]["reconverge_ns"].is_u64());

@@ -8,5 +8,6 @@ pub mod check;
 pub mod datasets;
 pub mod graph;
 pub mod inspect;
+pub mod receiver;
 pub mod replay;
 pub mod report;

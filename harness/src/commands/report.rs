@@ -51,7 +51,8 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         bar.inc(1);
         bar.set_message(label.to_owned());
     };
-    let results = run_set(set, &root, &file.name, mode, &mut progress)?;
+    let program = std::env::current_exe().context("cannot find the cortex binary to start receiver processes")?;
+    let results = run_set(set, &root, &file.name, mode, Some(&program), &mut progress)?;
     bar.finish_and_clear();
     measure::report::write(&results, &out)?;
     println!(

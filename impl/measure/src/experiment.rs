@@ -78,11 +78,16 @@ fn default_domain() -> u16 {
     71
 }
 
+fn inproc() -> String {
+    "inproc".to_owned()
+}
+
 fn link(name: &str, domain_id: u16) -> anyhow::Result<Link> {
     match name {
         "inproc" => Ok(Link::InProc),
         "rtps" => Ok(Link::Rtps { domain_id }),
-        other => anyhow::bail!("unknown transport {other:?} (inproc or rtps)"),
+        "rtps-processes" => Ok(Link::Processes { domain_id }),
+        other => anyhow::bail!("unknown transport {other:?} (inproc, rtps or rtps-processes)"),
     }
 }
 
@@ -98,6 +103,9 @@ pub struct PayloadSweep {
     pub count: usize,
     /// Agents, the source included.
     pub agents: u32,
+    /// Transport of the sweep: `inproc`, `rtps` or `rtps-processes`.
+    #[serde(default = "inproc")]
+    pub transport: String,
 }
 
 /// One fault-injection variant (applied to what every receiver receives).
@@ -143,6 +151,10 @@ pub struct FaultExperiment {
     pub log: LogSpec,
     /// Agents, the source included.
     pub agents: u32,
+    /// Transports the variants run over (each variant on each): `inproc`, `rtps`, `rtps-processes`. The injector
+    /// sits on each receiver's receiving side, in the receiver's own process for `rtps-processes`.
+    #[serde(default = "inproc_only")]
+    pub transports: Vec<String>,
     /// The variants (one without faults is expected, for comparison).
     pub variants: Vec<FaultSpec>,
 }
@@ -173,8 +185,9 @@ pub struct ExperimentSet {
     pub agents: Vec<u32>,
     /// Seeds (one run per seed: the repetitions).
     pub seeds: Vec<u64>,
-    /// Transports of the replay sweep: `inproc` (the in-process bus) and/or `rtps` (one rustdds participant per
-    /// agent, all in this process, over loopback).
+    /// Transports of the replay sweep: `inproc` (the in-process bus), `rtps` (one rustdds participant per agent,
+    /// all in this process, over loopback) and/or `rtps-processes` (every receiver a process of its own with its
+    /// own participant; the source is the `cortex` process).
     #[serde(default = "inproc_only")]
     pub transports: Vec<String>,
     /// DDS domain id of the RTPS runs.
@@ -193,7 +206,7 @@ impl ExperimentSet {
     pub fn steps(&self) -> u64 {
         (self.logs.len() * self.agents.len() * self.seeds.len() * self.transports.len()
             + self.payload.sizes.len()
-            + self.faults.variants.len()
+            + self.faults.variants.len() * self.faults.transports.len()
             + self.partition.repetitions as usize) as u64
     }
 }
@@ -238,15 +251,18 @@ fn plan(root: &Path, spec: &LogSpec) -> anyhow::Result<Workload> {
     workload::from_log(&root.join(&spec.path), rate(&spec.rate)?, spec.loops)
 }
 
-/// Runs `set` (relative paths against `root`), calling `progress` with a label after each run.
+/// Runs `set` (relative paths against `root`), calling `progress` with a label after each run. Runs over
+/// `rtps-processes` start `receiver_program` (the `cortex` binary) for every receiver.
 ///
 /// # Errors
-/// A log that cannot be read, an invalid rate, or a run that fails.
+/// A log that cannot be read, an invalid rate, an unknown transport, `rtps-processes` without a receiver program,
+/// or a run that fails.
 pub fn run_set(
     set: &ExperimentSet,
     root: &Path,
     experiment: &str,
     mode: &str,
+    receiver_program: Option<&Path>,
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<Results> {
     let started = Instant::now();
@@ -267,13 +283,17 @@ pub fn run_set(
     provenance.seeds.insert("partition_first_of_1_to_repetitions".into(), 1);
 
     let links = set.transports.iter().map(|t| link(t, set.rtps_domain)).collect::<anyhow::Result<Vec<_>>>()?;
+    let fault_links =
+        set.faults.transports.iter().map(|t| link(t, set.rtps_domain)).collect::<anyhow::Result<Vec<_>>>()?;
+    let payload_link = link(&set.payload.transport, set.rtps_domain)?;
+    let base = RunConfig { receiver_program: receiver_program.map(Path::to_path_buf), ..RunConfig::default() };
     let mut replay = Vec::new();
     for spec in &set.logs {
         let workload = plan(root, spec)?;
         for &link in &links {
             for &agents in &set.agents {
                 for &seed in &set.seeds {
-                    let result = run::run(&workload, &RunConfig { agents, seed, link, ..RunConfig::default() })
+                    let result = run::run(&workload, &RunConfig { agents, seed, link, ..base.clone() })
                         .with_context(|| format!("{} with {agents} agents over {}", workload.name, link.name()))?;
                     progress(&format!("{} {} N={agents} seed {seed}", workload.name, link.name()));
                     replay.push(result);
@@ -284,17 +304,21 @@ pub fn run_set(
     let mut payload = Vec::new();
     for &size in &set.payload.sizes {
         let workload = workload::synthetic(size, set.payload.rate_hz, set.payload.count, 1)?;
-        let config = RunConfig { agents: set.payload.agents, seed: 1, ..RunConfig::default() };
+        let config = RunConfig { agents: set.payload.agents, seed: 1, link: payload_link, ..base.clone() };
         payload.push(run::run(&workload, &config).with_context(|| format!("payload {size} B"))?);
         progress(&format!("payload {size} B"));
     }
     let mut faults = Vec::new();
     let workload = plan(root, &set.faults.log)?;
-    for variant in &set.faults.variants {
-        let config = RunConfig { agents: set.faults.agents, seed: 1, faults: variant.config(), ..RunConfig::default() };
-        let run = run::run(&workload, &config).with_context(|| format!("faults {}", variant.label))?;
-        faults.push(FaultRun { label: variant.label.clone(), run });
-        progress(&format!("faults {}", variant.label));
+    for &link in &fault_links {
+        for variant in &set.faults.variants {
+            let injected = variant.config();
+            let config = RunConfig { agents: set.faults.agents, seed: 1, link, faults: injected, ..base.clone() };
+            let run = run::run(&workload, &config)
+                .with_context(|| format!("faults {} over {}", variant.label, link.name()))?;
+            faults.push(FaultRun { label: variant.label.clone(), run });
+            progress(&format!("faults {} ({})", variant.label, link.name()));
+        }
     }
     let mut partitions = Vec::new();
     for seed in 1..=u64::from(set.partition.repetitions) {

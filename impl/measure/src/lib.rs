@@ -11,6 +11,8 @@
 //! - [`run`] — the in-process experiment: a planned sequence of encoded deltas (a replayed log or synthetic
 //!   writes) published through a [`transport::Transport`] (the in-process bus, optionally behind the seeded fault
 //!   injector) to N-1 receiver replicas on their own threads; per-write latencies, convergence windows, bytes.
+//! - [`process`] — runs whose receivers are separate processes, each with its own RTPS participant: the body of a
+//!   receiver process ([`process::receiver_main`]) and the source side that starts, probes and collects them.
 //! - [`workload`] — the planned writes: a bundled ROS 2 log through the `replay` bridge, or synthetic byte
 //!   attributes of a chosen size at a chosen rate.
 //! - [`partition`] — agents (`agent::Agent`, with anti-entropy) on the in-process bus: the time to reconverge
@@ -28,6 +30,7 @@ pub mod experiment;
 pub mod figures;
 pub mod latency;
 pub mod partition;
+pub mod process;
 pub mod provenance;
 pub mod report;
 pub mod run;
@@ -39,5 +42,5 @@ pub const SCHEMA_VERSION: u32 = 1;
 pub use clock::MonoClock;
 pub use latency::{LatencyRecorder, PayloadClass, Percentiles};
 pub use provenance::Provenance;
-pub use run::{RunConfig, RunResult};
+pub use run::{AgentCost, Link, RunConfig, RunResult};
 pub use workload::{PlannedWrite, Workload};

@@ -21,7 +21,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use bytes::{BufMut as _, Bytes, BytesMut};
-use dsr::{Delta, Replica, ReplicaId};
+use dsr::{Delta, Digest, Replica, ReplicaId};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 use transport::fault::{FaultConfig, FaultPlan};
@@ -44,6 +44,12 @@ pub enum Link {
         /// DDS domain id (each run also takes topics of its own).
         domain_id: u16,
     },
+    /// Every receiver a separate process with its own RTPS participant (see [`crate::process`]), over loopback UDP;
+    /// the source is this process. Needs [`RunConfig::receiver_program`].
+    Processes {
+        /// DDS domain id (each run also takes topics of its own).
+        domain_id: u16,
+    },
 }
 
 impl Link {
@@ -52,6 +58,7 @@ impl Link {
         match self {
             Link::InProc => "inproc",
             Link::Rtps { .. } => "rtps",
+            Link::Processes { .. } => "rtps-processes",
         }
     }
 }
@@ -71,6 +78,9 @@ pub struct RunConfig {
     pub inbox_capacity: usize,
     /// How long to wait, after the last write, for every receiver to apply everything.
     pub settle_timeout: Duration,
+    /// The program that runs a receiver process ([`Link::Processes`]): an executable taking
+    /// `measure-receiver --spec JSON` and calling [`crate::process::receiver_main`], e.g. the `cortex` binary.
+    pub receiver_program: Option<std::path::PathBuf>,
 }
 
 impl Default for RunConfig {
@@ -82,6 +92,7 @@ impl Default for RunConfig {
             faults: None,
             inbox_capacity: 1 << 20,
             settle_timeout: Duration::from_secs(20),
+            receiver_program: None,
         }
     }
 }
@@ -109,6 +120,22 @@ pub struct Bandwidth {
     pub injected_drops: u64,
     /// Extra copies delivered by the fault injector.
     pub injected_duplicates: u64,
+}
+
+/// CPU and memory of one agent of a run.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct AgentCost {
+    /// Replica id of the agent (1 is the source).
+    pub agent: u32,
+    /// `thread` (an agent on a thread of this process) or `process` (a receiver process of its own).
+    pub kind: &'static str,
+    /// CPU time spent receiving, nanoseconds: the receiver thread alone (`/proc/thread-self/schedstat`), or every
+    /// thread of a receiver process, its RTPS threads included (`getrusage`), from its first received sample until
+    /// it stops; for the source, its publishing thread while publishing.
+    pub cpu_ns: Option<u64>,
+    /// Peak resident memory, bytes (`VmHWM`): the agent's own process, or — for agents on threads — the shared
+    /// process, so the same figure for all of them.
+    pub peak_rss_bytes: Option<u64>,
 }
 
 /// What one run measured.
@@ -153,8 +180,11 @@ pub struct RunResult {
     pub source_cpu_ns: Option<u64>,
     /// CPU time of each receiver thread, nanoseconds.
     pub receiver_cpu_ns: Vec<Option<u64>>,
-    /// Peak resident memory of the whole process so far (`VmHWM`), bytes: the agents share the process.
+    /// Peak resident memory of this process so far (`VmHWM`), bytes: all agents of in-process runs, the source
+    /// of `rtps-processes` runs.
     pub process_peak_rss_bytes: Option<u64>,
+    /// CPU and memory per agent, the source first.
+    pub agent_costs: Vec<AgentCost>,
     /// Every latency, for merging runs (not serialised; the percentiles and CDF points are).
     #[serde(skip)]
     pub latency_histogram: Histogram<u64>,
@@ -163,17 +193,27 @@ pub struct RunResult {
     pub convergence_histogram: Histogram<u64>,
 }
 
-struct ReceiverOutcome {
-    applied_at: Vec<u64>,
-    refused: u64,
-    stats: TransportStats,
-    cpu_ns: Option<u64>,
-    replica: Replica,
-    probe_bytes: u64,
+/// What one receiver (thread or process) reports at the end of a run.
+#[derive(Clone, Debug)]
+pub(crate) struct ReceiverOutcome {
+    /// Apply time of every write on the run's clock, [`NOT_APPLIED`] if never applied.
+    pub applied_at: Vec<u64>,
+    /// Samples that could not be decoded or applied.
+    pub refused: u64,
+    /// The receiver's transport counters.
+    pub stats: TransportStats,
+    /// CPU time spent receiving.
+    pub cpu_ns: Option<u64>,
+    /// The receiver's final graph digest.
+    pub digest: Digest,
+    /// Bytes of probes received (not part of the workload).
+    pub probe_bytes: u64,
+    /// CPU and memory of the receiver.
+    pub cost: AgentCost,
 }
 
 /// A number distinguishing runs of this process (topic names of RTPS runs).
-fn clock_id() -> u64 {
+pub(crate) fn clock_id() -> u64 {
     static NEXT: AtomicU64 = AtomicU64::new(0);
     NEXT.fetch_add(1, Ordering::Relaxed)
 }
@@ -182,6 +222,19 @@ fn clock_id() -> u64 {
 pub fn thread_cpu_ns() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
     text.split_whitespace().next()?.parse().ok()
+}
+
+/// CPU time of every thread of this process (user + system) in nanoseconds, from `getrusage`.
+#[allow(unsafe_code)]
+pub fn process_cpu_ns() -> Option<u64> {
+    // SAFETY: an all-zero rusage is a valid value of this plain C struct.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `usage` is a valid, writable rusage; RUSAGE_SELF is always supported.
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) } != 0 {
+        return None;
+    }
+    let ns = |t: libc::timeval| (t.tv_sec as u64) * 1_000_000_000 + (t.tv_usec as u64) * 1_000;
+    Some(ns(usage.ru_utime) + ns(usage.ru_stime))
 }
 
 /// Transmitted bytes of the loopback interface (Linux).
@@ -197,13 +250,77 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
-const NOT_APPLIED: u64 = u64::MAX;
+/// Apply time of a write never applied.
+pub(crate) const NOT_APPLIED: u64 = u64::MAX;
 /// Sequence number of the probes sent until every receiver hears the source (RTPS discovery).
-const PROBE: u64 = u64::MAX;
+pub(crate) const PROBE: u64 = u64::MAX;
+
+/// What a sample was to a receiver.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Received {
+    /// A discovery probe.
+    Probe,
+    /// A write applied for the first time.
+    Applied,
+    /// A write applied before (a duplicate).
+    Again,
+    /// Bytes that are not a write of this run, or a delta the replica refused.
+    Refused,
+}
+
+/// The receiving side of a run, shared by receiver threads and receiver processes: decodes a sample's sequence
+/// number and delta, applies it, and stamps the first application of every write.
+pub(crate) struct Receiving {
+    pub replica: Replica,
+    pub applied_at: Vec<u64>,
+    pub applied: u64,
+    pub refused: u64,
+    pub probe_bytes: u64,
+}
+
+impl Receiving {
+    pub fn new(replica: Replica, writes: usize) -> Self {
+        Receiving { replica, applied_at: vec![NOT_APPLIED; writes], applied: 0, refused: 0, probe_bytes: 0 }
+    }
+
+    /// Handles one sample; `now` is read after the delta is applied.
+    pub fn on_sample(&mut self, bytes: &[u8], now: impl FnOnce() -> u64) -> Received {
+        let Some((header, body)) = bytes.split_first_chunk::<8>() else {
+            self.refused += 1;
+            return Received::Refused;
+        };
+        let seq = u64::from_le_bytes(*header);
+        if seq == PROBE {
+            self.probe_bytes += bytes.len() as u64;
+            return Received::Probe;
+        }
+        let ok = Delta::decode(body).ok().and_then(|delta| self.replica.apply(&delta).ok()).is_some();
+        let now = now();
+        match usize::try_from(seq).ok().and_then(|seq| self.applied_at.get_mut(seq)) {
+            Some(slot) if ok => {
+                if *slot == NOT_APPLIED {
+                    *slot = now;
+                    self.applied += 1;
+                    Received::Applied
+                } else {
+                    Received::Again
+                }
+            }
+            _ => {
+                self.refused += 1;
+                Received::Refused
+            }
+        }
+    }
+
+    pub fn all_applied(&self) -> bool {
+        self.applied == self.applied_at.len() as u64
+    }
+}
 
 fn receive(
     transport: Box<dyn Transport>,
-    mut replica: Replica,
+    replica: Replica,
     writes: usize,
     clock: MonoClock,
     applied: Arc<AtomicU64>,
@@ -211,44 +328,181 @@ fn receive(
     stop: Arc<AtomicBool>,
 ) -> ReceiverOutcome {
     let cpu_start = thread_cpu_ns();
-    let mut applied_at = vec![NOT_APPLIED; writes];
-    let mut refused = 0;
-    let mut probe_bytes = 0;
+    let mut receiving = Receiving::new(replica, writes);
     while !stop.load(Ordering::Acquire) {
         let Some(sample) = transport.recv_timeout(Duration::from_millis(2)) else { continue };
-        let Some((header, body)) = sample.bytes.split_first_chunk::<8>() else {
-            refused += 1;
-            continue;
-        };
-        let seq = u64::from_le_bytes(*header);
-        if seq == PROBE {
-            probe_bytes += sample.bytes.len() as u64;
-            probes.fetch_add(1, Ordering::Release);
-            continue;
-        }
-        let seq = seq as usize;
-        let ok = Delta::decode(body).ok().and_then(|delta| replica.apply(&delta).ok()).is_some();
-        let now = clock.now_ns();
-        match applied_at.get_mut(seq) {
-            Some(slot) if ok => {
-                if *slot == NOT_APPLIED {
-                    *slot = now;
-                    applied.fetch_add(1, Ordering::Release);
-                }
+        match receiving.on_sample(&sample.bytes, || clock.now_ns()) {
+            Received::Probe => {
+                probes.fetch_add(1, Ordering::Release);
             }
-            _ => refused += 1,
+            Received::Applied => {
+                applied.fetch_add(1, Ordering::Release);
+            }
+            Received::Again | Received::Refused => {}
         }
     }
     let cpu_ns = cpu_start.zip(thread_cpu_ns()).map(|(a, b)| b.saturating_sub(a));
-    ReceiverOutcome { applied_at, refused, stats: transport.stats(), cpu_ns, replica, probe_bytes }
+    let agent = receiving.replica.id().0;
+    ReceiverOutcome {
+        digest: receiving.replica.digest(),
+        applied_at: receiving.applied_at,
+        refused: receiving.refused,
+        stats: transport.stats(),
+        cpu_ns,
+        probe_bytes: receiving.probe_bytes,
+        cost: AgentCost { agent, kind: "thread", cpu_ns, peak_rss_bytes: None },
+    }
 }
 
-/// Runs `workload` from one source to `config.agents - 1` receivers over the in-process bus and measures it.
+/// Samples of a workload: the write's index (8 bytes, little-endian) before its encoded delta. Built before the
+/// clock matters, so publishing is all the source does while measured.
+pub(crate) fn samples(workload: &Workload) -> Vec<Bytes> {
+    workload
+        .writes
+        .iter()
+        .enumerate()
+        .map(|(seq, w)| {
+            let mut sample = BytesMut::with_capacity(8 + w.delta.len());
+            sample.put_u64_le(seq as u64);
+            sample.put_slice(&w.delta);
+            sample.freeze()
+        })
+        .collect()
+}
+
+/// Publishes `samples` at their due times from `start`; returns the publish stamps (as many as were published)
+/// and the source thread's CPU time, or the transport's error with the stamps so far.
+pub(crate) fn publish_all(
+    source: &dyn Transport,
+    workload: &Workload,
+    samples: Vec<Bytes>,
+    clock: MonoClock,
+    start: u64,
+) -> (Vec<u64>, Option<u64>, Option<transport::TransportError>) {
+    let cpu_before = thread_cpu_ns();
+    let mut sent_at = Vec::with_capacity(samples.len());
+    let mut publish_error = None;
+    for (write, sample) in workload.writes.iter().zip(samples) {
+        clock.sleep_until(start + write.due_ns);
+        sent_at.push(clock.now_ns());
+        if let Err(error) = source.publish(Channel::Updates, sample) {
+            publish_error = Some(error);
+            break;
+        }
+    }
+    let source_cpu_ns = cpu_before.zip(thread_cpu_ns()).map(|(a, b)| b.saturating_sub(a));
+    (sent_at, source_cpu_ns, publish_error)
+}
+
+/// What the source side of a run measured, for [`summarise`].
+pub(crate) struct SourceSide {
+    pub start: u64,
+    pub sent_at: Vec<u64>,
+    pub sample_bytes: u64,
+    pub source_cpu_ns: Option<u64>,
+    /// The source's wire bytes during the publishing span.
+    pub source_wire: u64,
+    pub loopback: Option<u64>,
+}
+
+/// Latencies, convergence windows, bandwidth and costs of a run from the source's stamps and the receivers'.
+pub(crate) fn summarise(
+    workload: &Workload,
+    config: &RunConfig,
+    source: SourceSide,
+    outcomes: Vec<ReceiverOutcome>,
+) -> RunResult {
+    let SourceSide { start, sent_at, sample_bytes, source_cpu_ns, source_wire, loopback } = source;
+    let last_publish = sent_at.last().copied().unwrap_or(start);
+    let mut latency = LatencyRecorder::new();
+    let mut windows = latency::histogram();
+    let mut not_everywhere = 0;
+    for (seq, &sent) in sent_at.iter().enumerate() {
+        let class = workload.writes[seq].class;
+        let mut window = 0;
+        let mut everywhere = true;
+        for outcome in &outcomes {
+            match outcome.applied_at.get(seq).copied().unwrap_or(NOT_APPLIED) {
+                NOT_APPLIED => everywhere = false,
+                at => {
+                    let ns = at.saturating_sub(sent);
+                    latency.record(class, ns);
+                    window = window.max(ns);
+                }
+            }
+        }
+        if everywhere {
+            windows.saturating_record(window.max(1));
+        } else {
+            not_everywhere += 1;
+        }
+    }
+    let digests_equal = outcomes.iter().all(|o| o.digest == workload.final_digest);
+    let last_apply = outcomes
+        .iter()
+        .flat_map(|o| o.applied_at.iter().copied().filter(|&t| t != NOT_APPLIED))
+        .max()
+        .unwrap_or(last_publish);
+    let span_s = (last_publish.saturating_sub(start) as f64 / 1e9).max(1e-3);
+    let received: Vec<u64> =
+        outcomes.iter().map(|o| o.stats.payload_bytes_received.saturating_sub(o.probe_bytes)).collect();
+    let wire_sent = source_wire + outcomes.iter().map(|o| o.stats.wire_bytes_sent).sum::<u64>();
+    let bandwidth = Bandwidth {
+        source_wire_bytes: source_wire,
+        wire_bytes_per_second: wire_sent as f64 / span_s,
+        received_bytes_per_second: received.iter().sum::<u64>() as f64 / span_s,
+        received_bytes: received,
+        loopback_tx_bytes: loopback,
+        loopback_tx_bytes_per_second: loopback.map(|b| b as f64 / span_s),
+        dropped_full: outcomes.iter().map(|o| o.stats.dropped_full).sum(),
+        injected_drops: outcomes.iter().map(|o| o.stats.dropped_injected).sum(),
+        injected_duplicates: outcomes.iter().map(|o| o.stats.duplicated_injected).sum(),
+    };
+    let process_peak_rss_bytes = peak_rss_bytes();
+    let mut agent_costs =
+        vec![AgentCost { agent: 1, kind: "thread", cpu_ns: source_cpu_ns, peak_rss_bytes: process_peak_rss_bytes }];
+    agent_costs.extend(outcomes.iter().map(|o| {
+        let mut cost = o.cost.clone();
+        cost.peak_rss_bytes = cost.peak_rss_bytes.or(process_peak_rss_bytes);
+        cost
+    }));
+    RunResult {
+        workload: workload.name.clone(),
+        transport: format!("{}{}", config.link.name(), if config.faults.is_some() { "+faults" } else { "" }),
+        agents: config.agents,
+        seed: config.seed,
+        writes: sent_at.len() as u64,
+        sample_bytes,
+        publish_seconds: last_publish.saturating_sub(start) as f64 / 1e9,
+        latency: latency.overall(),
+        latency_by_class: latency.by_class().into_iter().collect(),
+        latency_cdf: latency.cdf(50),
+        convergence: Percentiles::of(&windows),
+        convergence_cdf: latency::cdf(&windows, 50),
+        writes_not_everywhere: not_everywhere,
+        end_convergence_ns: digests_equal.then(|| last_apply.saturating_sub(last_publish)),
+        digests_equal,
+        refused: outcomes.iter().map(|o| o.refused).sum(),
+        bandwidth,
+        source_cpu_ns,
+        receiver_cpu_ns: outcomes.iter().map(|o| o.cpu_ns).collect(),
+        process_peak_rss_bytes,
+        agent_costs,
+        latency_histogram: latency.histogram().clone(),
+        convergence_histogram: windows,
+    }
+}
+
+/// Runs `workload` from one source to `config.agents - 1` receivers and measures it: receivers on threads of this
+/// process ([`Link::InProc`], [`Link::Rtps`]) or receiver processes ([`Link::Processes`], see [`crate::process`]).
 ///
 /// # Errors
-/// Fewer than 2 agents, a thread that cannot be started, or a publication the transport refuses.
+/// Fewer than 2 agents, a thread or process that cannot be started, or a publication the transport refuses.
 pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult> {
     anyhow::ensure!(config.agents >= 2, "a run needs at least 2 agents, not {}", config.agents);
+    if let Link::Processes { domain_id } = config.link {
+        return crate::process::run(workload, config, domain_id);
+    }
     let clock = MonoClock::start();
     let bus = Bus::new();
     let plan = config.faults.map(|faults| FaultPlan::new(config.seed, faults));
@@ -262,7 +516,7 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
         }
         Ok(match config.link {
             Link::InProc => wrap(&plan, bus.attach(config.inbox_capacity), clock),
-            Link::Rtps { domain_id } => {
+            Link::Rtps { domain_id } | Link::Processes { domain_id } => {
                 let rtps = RtpsTransport::new(RtpsConfig {
                     domain_id,
                     topic_prefix: topic_prefix.clone(),
@@ -294,18 +548,7 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
             .context("cannot start a receiver thread")?;
         threads.push(handle);
     }
-    // Samples are built before the clock matters: publishing is all the source does while measured.
-    let samples: Vec<Bytes> = workload
-        .writes
-        .iter()
-        .enumerate()
-        .map(|(seq, w)| {
-            let mut sample = BytesMut::with_capacity(8 + w.delta.len());
-            sample.put_u64_le(seq as u64);
-            sample.put_slice(&w.delta);
-            sample.freeze()
-        })
-        .collect();
+    let samples = samples(workload);
     let sample_bytes = samples.iter().map(|s| s.len() as u64).sum();
     // Probes until every receiver hears the source: RTPS discovery takes a while, and a reliable volatile reader
     // matched late would miss the first writes.
@@ -322,20 +565,8 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
     std::thread::sleep(Duration::from_millis(20));
     let source_before = source.stats();
     let lo_before = loopback_tx_bytes();
-    let cpu_before = thread_cpu_ns();
     let start = clock.now_ns();
-    let mut sent_at = Vec::with_capacity(n);
-    let mut publish_error = None;
-    for (write, sample) in workload.writes.iter().zip(samples) {
-        clock.sleep_until(start + write.due_ns);
-        sent_at.push(clock.now_ns());
-        if let Err(error) = source.publish(Channel::Updates, sample) {
-            publish_error = Some(error);
-            break;
-        }
-    }
-    let source_cpu_ns = cpu_before.zip(thread_cpu_ns()).map(|(a, b)| b.saturating_sub(a));
-    let last_publish = sent_at.last().copied().unwrap_or(start);
+    let (sent_at, source_cpu_ns, publish_error) = publish_all(source.as_ref(), workload, samples, clock, start);
     let deadline = clock.now_ns() + config.settle_timeout.as_nanos() as u64;
     while counters.iter().any(|c| c.load(Ordering::Acquire) < sent_at.len() as u64) && clock.now_ns() < deadline {
         std::thread::sleep(Duration::from_micros(200));
@@ -349,78 +580,16 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
     if let Some(error) = publish_error {
         return Err(error).context("the source's transport refused a write");
     }
-
-    let mut latency = LatencyRecorder::new();
-    let mut windows = latency::histogram();
-    let mut not_everywhere = 0;
-    for (seq, &sent) in sent_at.iter().enumerate() {
-        let class = workload.writes[seq].class;
-        let mut window = 0;
-        let mut everywhere = true;
-        for outcome in &outcomes {
-            match outcome.applied_at[seq] {
-                NOT_APPLIED => everywhere = false,
-                at => {
-                    let ns = at.saturating_sub(sent);
-                    latency.record(class, ns);
-                    window = window.max(ns);
-                }
-            }
-        }
-        if everywhere {
-            windows.saturating_record(window.max(1));
-        } else {
-            not_everywhere += 1;
-        }
-    }
-    let digests_equal = outcomes.iter().all(|o| o.replica.digest() == workload.final_digest);
-    let last_apply = outcomes
-        .iter()
-        .flat_map(|o| o.applied_at.iter().copied().filter(|&t| t != NOT_APPLIED))
-        .max()
-        .unwrap_or(last_publish);
-    let span_s = (last_publish.saturating_sub(start) as f64 / 1e9).max(1e-3);
-    let source_stats = source.stats();
-    let source_wire = source_stats.wire_bytes_sent - source_before.wire_bytes_sent;
-    let received: Vec<u64> =
-        outcomes.iter().map(|o| o.stats.payload_bytes_received.saturating_sub(o.probe_bytes)).collect();
-    let wire_sent = source_wire + outcomes.iter().map(|o| o.stats.wire_bytes_sent).sum::<u64>();
-    let loopback = lo_before.zip(lo_after).map(|(a, b)| b.saturating_sub(a));
-    let bandwidth = Bandwidth {
-        source_wire_bytes: source_wire,
-        wire_bytes_per_second: wire_sent as f64 / span_s,
-        received_bytes_per_second: received.iter().sum::<u64>() as f64 / span_s,
-        received_bytes: received,
-        loopback_tx_bytes: loopback,
-        loopback_tx_bytes_per_second: loopback.map(|b| b as f64 / span_s),
-        dropped_full: outcomes.iter().map(|o| o.stats.dropped_full).sum(),
-        injected_drops: outcomes.iter().map(|o| o.stats.dropped_injected).sum(),
-        injected_duplicates: outcomes.iter().map(|o| o.stats.duplicated_injected).sum(),
-    };
-    Ok(RunResult {
-        workload: workload.name.clone(),
-        transport: format!("{}{}", config.link.name(), if config.faults.is_some() { "+faults" } else { "" }),
-        agents: config.agents,
-        seed: config.seed,
-        writes: sent_at.len() as u64,
+    let source_wire = source.stats().wire_bytes_sent - source_before.wire_bytes_sent;
+    let side = SourceSide {
+        start,
+        sent_at,
         sample_bytes,
-        publish_seconds: last_publish.saturating_sub(start) as f64 / 1e9,
-        latency: latency.overall(),
-        latency_by_class: latency.by_class().into_iter().collect(),
-        latency_cdf: latency.cdf(50),
-        convergence: Percentiles::of(&windows),
-        convergence_cdf: latency::cdf(&windows, 50),
-        writes_not_everywhere: not_everywhere,
-        end_convergence_ns: digests_equal.then(|| last_apply.saturating_sub(last_publish)),
-        digests_equal,
-        refused: outcomes.iter().map(|o| o.refused).sum(),
-        bandwidth,
         source_cpu_ns,
-        receiver_cpu_ns: outcomes.iter().map(|o| o.cpu_ns).collect(),
-        process_peak_rss_bytes: peak_rss_bytes(),
-        latency_histogram: latency.histogram().clone(),
-        convergence_histogram: windows,
-    })
+        source_wire,
+        loopback: lo_before.zip(lo_after).map(|(a, b)| b.saturating_sub(a)),
+    };
+    Ok(summarise(workload, config, side, outcomes))
 }
 
 #[cfg(test)]
