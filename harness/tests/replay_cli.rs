@@ -1,6 +1,7 @@
 //! `cortex replay` and `cortex datasets verify` from the command line: a bundled log replays in process with 3
-//! agents to equal digests, a damaged file is an error that says where (or a recovered prefix with `--recover`), the
-//! RTPS transport is refused until the agents exist, and a log that does not match the manifest fails the check.
+//! agents to equal digests, a damaged file is an error that says where (or a recovered prefix with `--recover`), a
+//! log replays over RTPS from the bridge into agent processes (plain, and a BICA role) to equal digests, and a log
+//! that does not match the manifest fails the check.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -32,7 +33,7 @@ fn bundled_log_replays_to_equal_digests() {
 }
 
 #[test]
-fn damaged_files_and_unsupported_transport_are_errors() {
+fn damaged_files_and_bad_arguments_are_errors() {
     let out = cortex(&["replay", &repo("impl/replay/tests/fixtures/chunk_not_closed.mcap")]);
     assert_eq!(out.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -44,9 +45,42 @@ fn damaged_files_and_unsupported_transport_are_errors() {
     let out = cortex(&["replay", &padded, "--recover", "--rate", "max"]);
     assert!(out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("replaying the 0 messages read before it"));
-    let out = cortex(&["replay", &repo("datasets/logs/ouster_os1-128_1scan.mcap"), "--transport", "rtps"]);
+    let log = repo("datasets/logs/ouster_os1-128_1scan.mcap");
+    let out = cortex(&["replay", &log, "--roles", "camera-detector"]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--role bridge"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--roles needs --transport rtps"));
+    let out = cortex(&["replay", &log, "--transport", "rtps", "--agents", "2", "--roles", "attention,attention"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("2 roles given for 1 agent processes"));
+    let out = cortex(&["replay", &log, "--transport", "rtps", "--roles", "bridge"]);
+    assert_eq!(out.status.code(), Some(2), "a usage error");
+}
+
+#[test]
+fn a_log_replays_over_rtps_into_agent_processes() {
+    let log = repo("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap");
+    let args = ["replay", &log, "--transport", "rtps", "--domain", "78", "--rate", "4", "--json"];
+    let out = cortex(&[&args[..], &["--agents", "2"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    assert_eq!(summary["transport"], "rtps");
+    assert_eq!(summary["digests_equal"], true);
+    assert_eq!(summary["messages"], 281);
+    assert_eq!(summary["bridge"]["decoded"]["sensor_msgs/msg/Image"], 20);
+    let agents = summary["agent_reports"].as_array().unwrap();
+    assert_eq!(agents.len(), 2);
+    assert_eq!(agents[0]["role"], "bridge");
+    assert!(agents[0]["nodes"].as_u64().unwrap() >= 5 && agents[1]["nodes"] == agents[0]["nodes"]);
+    assert!(agents[1]["samples_received"].as_u64().unwrap() >= summary["deltas"].as_u64().unwrap());
+    assert!(summary["converged_ms"].is_f64());
+
+    // A BICA role in one of the processes: quiesced after the replay, then every graph is equal.
+    let out = cortex(&[&args[..], &["--agents", "3", "--roles", "camera-detector"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    assert_eq!(summary["digests_equal"], true);
+    let roles: Vec<_> = summary["agent_reports"].as_array().unwrap().iter().map(|a| a["role"].clone()).collect();
+    assert_eq!(roles, ["bridge", "camera-detector", "plain"]);
 }
 
 #[test]

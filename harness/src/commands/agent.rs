@@ -83,6 +83,11 @@ pub struct AgentArgs {
     /// Period of the role's components.
     #[arg(long, default_value_t = 100)]
     pub period_ms: u64,
+    /// Take commands on standard input, one per line: `quiesce` stops the role's runtime (the agent keeps
+    /// replicating, so its graph can settle); end of input stops the agent as Ctrl-C does. `cortex replay
+    /// --transport rtps` drives its agent processes this way.
+    #[arg(long)]
+    pub control_stdin: bool,
 }
 
 /// The BICA roles an agent process can run.
@@ -136,9 +141,13 @@ pub fn run(args: AgentArgs) -> Result<()> {
             if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {
                 bail!("agent {} got no graph in time to start the bridge", args.id);
             }
-            let log = args.log.clone().context("the bridge role needs --log FILE.mcap")?;
+            let path = args.log.clone().context("the bridge role needs --log FILE.mcap")?;
+            let log = replay::Log::open(&path, replay::ReadOptions::default())
+                .with_context(|| format!("cannot replay {}", path.display()))?;
             let (agent, stop, rate, loops) = (Arc::clone(&agent), Arc::clone(&stop), args.rate, args.loops);
-            player = Some(std::thread::spawn(move || play_log(&agent, &log, rate, loops, &stop)));
+            player = Some(std::thread::spawn(move || {
+                play_log(&agent, &log, replay::BridgeOptions::default(), rate, loops, &stop).map(|p| p.bridge)
+            }));
             None
         }
         Some(role) => {
@@ -156,6 +165,22 @@ pub fn run(args: AgentArgs) -> Result<()> {
         let stop = Arc::clone(&stop);
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
     }
+    let quiesce = Arc::new(AtomicBool::new(false));
+    if args.control_stdin {
+        let (stop, quiesce) = (Arc::clone(&stop), Arc::clone(&quiesce));
+        std::thread::spawn(move || {
+            for line in std::io::stdin().lines() {
+                match line.as_deref().map(str::trim) {
+                    Ok("quiesce") => quiesce.store(true, Ordering::SeqCst),
+                    Ok("") => {}
+                    Ok(other) => eprintln!("agent: unknown command on standard input: {other:?} (quiesce)"),
+                    Err(_) => break,
+                }
+            }
+            stop.store(true, Ordering::SeqCst);
+        });
+    }
+    let mut driver = driver;
     let started = Instant::now();
     let deadline = args.run_for_ms.map(|ms| started + Duration::from_millis(ms));
     let mut written = false;
@@ -169,6 +194,12 @@ pub fn run(args: AgentArgs) -> Result<()> {
                 let id = agent.insert_node(node).with_context(|| format!("inserting {name}"))?;
                 agent.set_attr(id, attrs::POS_Y, args.id as f32)?;
             }
+        }
+        if quiesce.load(Ordering::SeqCst)
+            && let Some(driver) = driver.take()
+        {
+            agent.stop_serving_calls();
+            driver.stop().context("stopping the role's runtime")?;
         }
         if args.json_status && Instant::now() >= next_status {
             next_status = Instant::now() + Duration::from_millis(args.status_ms);
@@ -219,6 +250,7 @@ fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> s
         "collision": status.collision,
         "uptime_ms": started.elapsed().as_millis() as u64,
         "samples_sent": status.transport.samples_sent,
+        "samples_received": status.transport.samples_received,
         "calls_served": status.calls_served,
         "node_types": agent.read(|r| {
             let mut counts = std::collections::BTreeMap::<String, u64>::new();
@@ -231,24 +263,38 @@ fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> s
     })
 }
 
-/// The `bridge` role: paces a log on the monotonic clock and writes each message into the agent's graph through
+/// What [`play_log`] played.
+#[derive(Debug, Clone, Default)]
+pub struct Played {
+    /// The bridge's counters.
+    pub bridge: replay::BridgeStats,
+    /// Messages paced (all loops).
+    pub messages: u64,
+    /// Payload bytes of those messages.
+    pub bytes: u64,
+    /// Deltas the bridge wrote (each published by the agent).
+    pub deltas: u64,
+}
+
+/// The `bridge` role: paces `log` on the monotonic clock and writes each message into the agent's graph through
 /// `replay::Bridge` (the agent publishes the deltas), until the log ends or `stop` is set.
-fn play_log(
+pub fn play_log(
     agent: &Agent<RtpsTransport>,
-    path: &std::path::Path,
+    log: &replay::Log,
+    options: replay::BridgeOptions,
     rate: replay::Rate,
     loops: u32,
     stop: &AtomicBool,
-) -> Result<replay::BridgeStats> {
-    let log = replay::Log::open(path, replay::ReadOptions::default())
-        .with_context(|| format!("cannot replay {}", path.display()))?;
-    let mut bridge = replay::Bridge::new(replay::BridgeOptions::default());
+) -> Result<Played> {
+    let mut bridge = replay::Bridge::new(options);
+    let mut played = Played::default();
     let origin = Instant::now();
     let clock = move || origin.elapsed().as_nanos() as u64;
     for item in replay::Pacer::new(&log.messages, rate, loops, clock) {
         loop {
             if stop.load(Ordering::SeqCst) {
-                return Ok(bridge.stats().clone());
+                played.bridge = bridge.stats().clone();
+                return Ok(played);
             }
             let now = clock();
             if now >= item.due_ns {
@@ -256,9 +302,15 @@ fn play_log(
             }
             std::thread::sleep(Duration::from_nanos(item.due_ns - now).min(Duration::from_millis(50)));
         }
-        agent.update(|replica, now_ns| ((), bridge.ingest(replica, now_ns, item.message, item.shift_ns)))?;
+        played.messages += 1;
+        played.bytes += item.message.data.len() as u64;
+        played.deltas += agent.update(|replica, now_ns| {
+            let deltas = bridge.ingest(replica, now_ns, item.message, item.shift_ns);
+            (deltas.len() as u64, deltas)
+        })?;
     }
-    Ok(bridge.stats().clone())
+    played.bridge = bridge.stats().clone();
+    Ok(played)
 }
 
 fn ms(period_ms: u64) -> u64 {

@@ -5,9 +5,11 @@
 //! `--recover`, the end of what is replayed); messages are paced at the recorded timing divided by `--rate` (or as
 //! fast as possible with `--rate max`) and looped `--loop` times; the bridge writes them into its replica and its
 //! deltas go to the other agents. With `--transport inproc` the agents are replicas in this process joined by the
-//! seeded in-memory delivery of `replay::inproc`; `--transport rtps` is refused with a pointer to `cortex agent
-//! --role bridge`, which plays a log into agent processes over RTPS (this command does not start processes yet). The summary gives messages by type, unknown and skipped ones, bytes, deltas,
-//! throughput and whether the final digests are equal (exit code 1 if they are not).
+//! seeded in-memory delivery of `replay::inproc`. With `--transport rtps` the bridge is an agent in this process
+//! and the others are `cortex agent` processes on the DDS engine, plain or running the BICA roles given with
+//! `--roles` (see [`super::replay_rtps`]). The summary gives messages by type, unknown and skipped ones, bytes,
+//! deltas, throughput and whether the final digests are equal (exit code 1 if they are not); over RTPS also each
+//! agent's graph and the time from the end of the replay until every agent had the bridge's digest.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -27,7 +29,7 @@ use serde::Serialize;
 pub enum Transport {
     /// Replicas in this process, seeded in-memory delivery.
     Inproc,
-    /// Agents as processes over RTPS: refused here; use `cortex agent --role bridge`.
+    /// The bridge agent in this process, the other agents as `cortex agent` processes over RTPS.
     Rtps,
 }
 
@@ -63,6 +65,16 @@ pub struct ReplayArgs {
     /// Deltas in flight in the in-process delivery before one is delivered (reordering depth).
     #[arg(long, default_value_t = 64)]
     window: usize,
+    /// DDS domain id (`--transport rtps`).
+    #[arg(long, default_value_t = 0)]
+    domain: u16,
+    /// BICA roles of agents 2, 3, ... (`--transport rtps`), comma-separated, each `ROLE[:NODE]`: e.g.
+    /// `camera-detector:cam0,laser-detector:scan`. The other agents are plain.
+    #[arg(long, value_delimiter = ',')]
+    roles: Vec<super::replay_rtps::RoleSpec>,
+    /// How long to wait for the agent processes to be ready, and after the replay for equal digests (ms).
+    #[arg(long, default_value_t = 30_000)]
+    settle_ms: u64,
     /// Print stable, machine-readable JSON instead of text.
     #[arg(long)]
     json: bool,
@@ -90,6 +102,12 @@ struct Summary {
     deliveries: u64,
     digests: Vec<String>,
     digests_equal: bool,
+    /// Over RTPS: each agent's graph at the end, the bridge first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    agent_reports: Vec<super::replay_rtps::AgentReport>,
+    /// Over RTPS: milliseconds from the end of the replay until every agent had the bridge's digest.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    converged_ms: Option<f64>,
 }
 
 /// Runs `cortex replay`.
@@ -98,14 +116,11 @@ struct Summary {
 /// A file that cannot be read (or is damaged, without `--recover`), bad arguments, the RTPS transport, a delta a
 /// receiver refuses, or final digests that differ.
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
-    if args.transport == Transport::Rtps {
-        bail!(
-            "cortex replay runs its agents in process (--transport inproc); to play a log into agents over RTPS, run \
-             `cortex agent --id N --role bridge --log FILE.mcap` beside the other agent processes"
-        );
-    }
     if !(1..=64).contains(&args.agents) {
         bail!("--agents must be between 1 and 64, not {}", args.agents);
+    }
+    if args.transport == Transport::Inproc && !args.roles.is_empty() {
+        bail!("--roles needs --transport rtps (the roles run in agent processes)");
     }
     let options = ReadOptions { recover: args.recover, ..ReadOptions::default() };
     let log = Log::open(&args.file, options).context("cannot replay")?;
@@ -116,6 +131,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             log.messages.len(),
             log.unread_bytes
         );
+    }
+    if args.transport == Transport::Rtps {
+        return run_rtps(&args, &log);
     }
     let dictionary = replay::bridge::dictionary().context("bridge dictionary")?;
     let mut replica = Replica::with_dictionary(ReplicaId(1), dictionary.clone());
@@ -139,10 +157,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         file: args.file.display().to_string(),
         transport: "inproc",
         agents: args.agents,
-        rate: match args.rate {
-            Rate::Max => "max".to_owned(),
-            Rate::Factor(factor) => factor.to_string(),
-        },
+        rate: rate_text(args.rate),
         loops: args.loops,
         file_bytes: log.file_bytes,
         damage: log.damage.as_ref().map(ToString::to_string),
@@ -158,16 +173,66 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         deliveries: stats.deliveries,
         digests: digests.iter().map(ToString::to_string).collect(),
         digests_equal,
+        agent_reports: Vec::new(),
+        converged_ms: None,
     };
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
-    } else {
-        print!("{}", text(&summary));
+    finish(&args, &summary)
+}
+
+fn rate_text(rate: Rate) -> String {
+    match rate {
+        Rate::Max => "max".to_owned(),
+        Rate::Factor(factor) => factor.to_string(),
     }
-    if !digests_equal {
+}
+
+/// Prints the summary; an error if the digests differ.
+fn finish(args: &ReplayArgs, summary: &Summary) -> anyhow::Result<()> {
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(summary)?);
+    } else {
+        print!("{}", text(summary));
+    }
+    if !summary.digests_equal {
         bail!("the agents' final digests differ: {}", summary.digests.join(" "));
     }
     Ok(())
+}
+
+fn run_rtps(args: &ReplayArgs, log: &Log) -> anyhow::Result<()> {
+    let config = super::replay_rtps::RtpsReplay {
+        agents: args.agents,
+        domain: args.domain,
+        roles: args.roles.clone(),
+        settle: Duration::from_millis(args.settle_ms),
+    };
+    let options = BridgeOptions { topics: args.topics.clone(), opaque: args.opaque };
+    let outcome = super::replay_rtps::replay(log, options, args.rate, args.loops, &config)?;
+    let played = &outcome.played;
+    let summary = Summary {
+        file: args.file.display().to_string(),
+        transport: "rtps",
+        agents: args.agents,
+        rate: rate_text(args.rate),
+        loops: args.loops,
+        file_bytes: log.file_bytes,
+        damage: log.damage.as_ref().map(ToString::to_string),
+        unread_bytes: log.unread_bytes,
+        messages: played.messages,
+        payload_bytes: played.bytes,
+        seconds: outcome.seconds,
+        messages_per_second: played.messages as f64 / outcome.seconds.max(1e-9),
+        megabytes_per_second: played.bytes as f64 / 1e6 / outcome.seconds.max(1e-9),
+        bridge: played.bridge.clone(),
+        deltas: played.deltas,
+        delta_bytes: outcome.bridge_bytes,
+        deliveries: outcome.agents.iter().skip(1).map(|a| a.samples_received).sum(),
+        digests: outcome.agents.iter().map(|a| a.digest.clone()).collect(),
+        digests_equal: outcome.digests_equal,
+        agent_reports: outcome.agents.clone(),
+        converged_ms: outcome.converged_ms,
+    };
+    finish(args, &summary)
 }
 
 fn text(s: &Summary) -> String {
@@ -204,6 +269,19 @@ fn text(s: &Summary) -> String {
     }
     let _ =
         writeln!(out, "  deltas        {} ({} bytes encoded), {} deliveries", s.deltas, s.delta_bytes, s.deliveries);
+    for a in &s.agent_reports {
+        let _ = writeln!(
+            out,
+            "  agent {:<3}     {:<15} {:>6} nodes  digest {}  {} samples received, {} sent",
+            a.id, a.role, a.nodes, a.digest, a.samples_received, a.samples_sent
+        );
+    }
+    if let Some(ms) = s.converged_ms {
+        let _ = writeln!(
+            out,
+            "  converged     every agent had the bridge's digest {ms:.1} ms after the replay ended (status every 100 ms)"
+        );
+    }
     let verdict = if s.digests_equal { "equal" } else { "DIFFER" };
     let _ = writeln!(out, "  digests       {verdict}: {}", s.digests.join(" "));
     out

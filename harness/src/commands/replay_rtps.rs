@@ -1,0 +1,285 @@
+//! `cortex replay --transport rtps`: the log is played by a bridge agent in this process into a graph shared over
+//! RTPS with N−1 `cortex agent` processes (plain agents, or BICA roles such as `camera-detector`), which join it
+//! from the bridge like any late joiner.
+//!
+//! The sequence: the bridge agent starts alone on a fresh topic prefix (its own empty graph after a short wait);
+//! the agent processes start with `--control-stdin --json-status` and report ready once they hold the graph; the
+//! log is played at its pace; then every role is told to `quiesce` (its runtime stops writing, the agent keeps
+//! replicating) and the command waits until every agent reports the bridge's digest — the time from the end of
+//! the replay to that moment is the end-of-replay convergence window. Closing the processes' standard input
+//! stops them.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead as _, BufReader, Write as _};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::str::FromStr;
+use std::sync::atomic::AtomicBool;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, Result, bail};
+use serde::Serialize;
+
+use super::agent::{Played, Role, play_log, start_rtps_agent};
+
+/// A BICA role for one agent process, with the node it works on: `camera-detector`, `laser-detector:scan`, ...
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RoleSpec {
+    /// The role (`cortex agent --role`).
+    pub role: Role,
+    /// Its node (`cortex agent --sensor`), if not the role's default.
+    pub sensor: Option<String>,
+}
+
+impl FromStr for RoleSpec {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        let (name, sensor) = match text.split_once(':') {
+            Some((name, sensor)) if !sensor.is_empty() => (name, Some(sensor.to_owned())),
+            Some(_) => return Err(format!("{text:?}: empty sensor after ':'")),
+            None => (text, None),
+        };
+        let role = <Role as clap::ValueEnum>::from_str(name, true).map_err(|_| {
+            format!("{name:?} is not a role (camera-detector, laser-detector, attention, fixture-camera, bridge)")
+        })?;
+        if role == Role::Bridge {
+            return Err("the bridge is this process; give the other agents' roles".to_owned());
+        }
+        Ok(RoleSpec { role, sensor })
+    }
+}
+
+/// How the RTPS replay runs.
+#[derive(Debug, Clone)]
+pub struct RtpsReplay {
+    /// Agents, the bridge included.
+    pub agents: u32,
+    /// DDS domain id.
+    pub domain: u16,
+    /// Roles of agents 2, 3, ... (the rest are plain agents).
+    pub roles: Vec<RoleSpec>,
+    /// How long to wait for the agents to be ready, and after the replay for equal digests.
+    pub settle: Duration,
+}
+
+/// One agent's last report.
+#[derive(Debug, Clone, Serialize)]
+pub struct AgentReport {
+    /// Agent id (1 is the bridge).
+    pub id: u32,
+    /// Its role (`bridge`, `plain`, or a BICA role).
+    pub role: String,
+    /// Nodes in its graph.
+    pub nodes: u64,
+    /// Its graph digest.
+    pub digest: String,
+    /// Samples it received.
+    pub samples_received: u64,
+    /// Samples it published.
+    pub samples_sent: u64,
+}
+
+/// What an RTPS replay did.
+#[derive(Debug)]
+pub struct RtpsOutcome {
+    /// What the bridge played.
+    pub played: Played,
+    /// Seconds of the replay (pacing included).
+    pub seconds: f64,
+    /// Bytes of samples the bridge published during the replay.
+    pub bridge_bytes: u64,
+    /// Every agent's last report, the bridge first.
+    pub agents: Vec<AgentReport>,
+    /// Whether every agent reported the bridge's digest.
+    pub digests_equal: bool,
+    /// Milliseconds from the end of the replay until every agent reported the bridge's digest.
+    pub converged_ms: Option<f64>,
+}
+
+/// An agent process whose status lines arrive on a channel; killed if dropped while still running.
+struct AgentProcess {
+    id: u32,
+    role: String,
+    child: Child,
+    stdin: Option<ChildStdin>,
+}
+
+impl Drop for AgentProcess {
+    fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+fn spawn(
+    id: u32,
+    domain: u16,
+    prefix: &str,
+    role: Option<&RoleSpec>,
+    tx: mpsc::Sender<(u32, serde_json::Value)>,
+) -> Result<AgentProcess> {
+    let program = std::env::current_exe().context("cannot find the cortex binary")?;
+    let mut command = Command::new(program);
+    command.args(["agent", "--id", &id.to_string(), "--domain", &domain.to_string(), "--topic-prefix", prefix]).args([
+        "--json-status",
+        "--status-ms",
+        "100",
+        "--join-wait-ms",
+        "60000",
+        "--control-stdin",
+    ]);
+    if let Some(spec) = role {
+        command.args(["--role", &role_name(spec.role)]);
+        if let Some(sensor) = &spec.sensor {
+            command.args(["--sensor", sensor]);
+        }
+    }
+    let mut child = command
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .context("cannot start a cortex agent process")?;
+    let stdout = child.stdout.take().context("agent stdout")?;
+    let stdin = child.stdin.take();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Ok(value) = serde_json::from_str(&line)
+                && tx.send((id, value)).is_err()
+            {
+                return;
+            }
+        }
+    });
+    let role = role.map_or_else(|| "plain".to_owned(), |r| role_name(r.role));
+    Ok(AgentProcess { id, role, child, stdin })
+}
+
+/// The role's name on the command line (`camera-detector`).
+fn role_name(role: Role) -> String {
+    clap::ValueEnum::to_possible_value(&role).map(|v| v.get_name().to_owned()).unwrap_or_default()
+}
+
+fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentReport {
+    AgentReport {
+        id,
+        role: role.to_owned(),
+        nodes: status["nodes"].as_u64().unwrap_or(0),
+        digest: status["digest"].as_str().unwrap_or("none").to_owned(),
+        samples_received: status["samples_received"].as_u64().unwrap_or(0),
+        samples_sent: status["samples_sent"].as_u64().unwrap_or(0),
+    }
+}
+
+/// Plays `log` from a bridge agent in this process to `config.agents - 1` agent processes over RTPS.
+///
+/// # Errors
+/// The DDS domain cannot be joined, an agent process cannot start or is not ready within the settle time, or the
+/// bridge's agent refuses a write.
+pub fn replay(
+    log: &replay::Log,
+    options: replay::BridgeOptions,
+    rate: replay::Rate,
+    loops: u32,
+    config: &RtpsReplay,
+) -> Result<RtpsOutcome> {
+    if config.roles.len() > config.agents.saturating_sub(1) as usize {
+        bail!("{} roles given for {} agent processes", config.roles.len(), config.agents.saturating_sub(1));
+    }
+    let prefix = format!("replay{}", std::process::id());
+    let bridge = start_rtps_agent(1, 300, None, config.domain, &prefix)?;
+    if !bridge.wait_ready(Duration::from_secs(10)) {
+        bail!("the bridge agent did not start its graph");
+    }
+    let (tx, rx) = mpsc::channel();
+    let mut procs = Vec::new();
+    for id in 2..=config.agents {
+        let role = config.roles.get((id - 2) as usize);
+        procs.push(spawn(id, config.domain, &prefix, role, tx.clone())?);
+    }
+    drop(tx);
+    let mut last: BTreeMap<u32, serde_json::Value> = BTreeMap::new();
+    let deadline = Instant::now() + config.settle;
+    while last.len() < procs.len() || !last.values().all(|s| s["ready"] == true) {
+        let Ok((id, status)) = rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) else {
+            let ready = last.values().filter(|s| s["ready"] == true).count();
+            bail!("{ready} of {} agent processes were ready within {:?}", procs.len(), config.settle);
+        };
+        last.insert(id, status);
+    }
+
+    let stop = AtomicBool::new(false);
+    let before = bridge.status().transport;
+    let started = Instant::now();
+    let played = play_log(&bridge, log, options, rate, loops, &stop)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let ended = Instant::now();
+    let bridge_bytes = bridge.status().transport.payload_bytes_sent - before.payload_bytes_sent;
+    for proc in &mut procs {
+        if proc.role != "plain"
+            && let Some(stdin) = proc.stdin.as_mut()
+        {
+            // An agent that has died shows up below as not converged.
+            let _ = writeln!(stdin, "quiesce");
+        }
+    }
+    let deadline = ended + config.settle;
+    let mut converged_ms = None;
+    // Statuses printed after the quiesce only: the roles may still have been writing before it.
+    last.clear();
+    while Instant::now() < deadline {
+        let Ok((id, status)) = rx.recv_timeout(Duration::from_millis(50)) else { continue };
+        last.insert(id, status);
+        let Some(target) = bridge.digest().map(|d| d.to_string()) else { continue };
+        if last.len() == procs.len() && last.values().all(|s| s["digest"].as_str() == Some(target.as_str())) {
+            converged_ms = Some(ended.elapsed().as_secs_f64() * 1e3);
+            break;
+        }
+    }
+    let status = bridge.status();
+    let mut agents = vec![AgentReport {
+        id: 1,
+        role: "bridge".to_owned(),
+        nodes: status.nodes as u64,
+        digest: bridge.digest().map_or_else(|| "none".to_owned(), |d| d.to_string()),
+        samples_received: status.transport.samples_received,
+        samples_sent: status.transport.samples_sent,
+    }];
+    for proc in &procs {
+        let status = last.get(&proc.id).cloned().unwrap_or_default();
+        agents.push(report(proc.id, &proc.role, &status));
+    }
+    for proc in &mut procs {
+        proc.stdin = None;
+    }
+    let give_up = Instant::now() + Duration::from_secs(10);
+    for proc in &mut procs {
+        while matches!(proc.child.try_wait(), Ok(None)) && Instant::now() < give_up {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    drop(procs);
+    bridge.shutdown();
+    let digests_equal = agents.iter().all(|a| a.digest == agents[0].digest);
+    Ok(RtpsOutcome { played, seconds, bridge_bytes, agents, digests_equal, converged_ms })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn role_specs_parse_with_and_without_a_sensor() {
+        assert_eq!("camera-detector".parse(), Ok(RoleSpec { role: Role::CameraDetector, sensor: None }));
+        assert_eq!(
+            "laser-detector:scan".parse(),
+            Ok(RoleSpec { role: Role::LaserDetector, sensor: Some("scan".to_owned()) })
+        );
+        assert!("bridge".parse::<RoleSpec>().unwrap_err().contains("this process"));
+        assert!("painter".parse::<RoleSpec>().unwrap_err().contains("not a role"));
+        assert!("attention:".parse::<RoleSpec>().unwrap_err().contains("empty sensor"));
+    }
+}
