@@ -44,6 +44,7 @@ partition_ms = 50
 rate_hz = 100
 announce_ms = 50
 repetitions = 1
+transports = ["inproc", "rtps"]
 "#
     )
 }
@@ -108,6 +109,8 @@ fn tiny_report_has_every_figure_and_section() {
     assert_eq!(results["provenance"]["datasets"].as_array().unwrap().len(), 2);
     assert!(results["provenance"]["datasets"].as_array().unwrap().iter().all(|d| d["sha256"] == d["manifest_sha256"]));
     assert!(results["partition"][0]["reconverge_ns"].is_u64());
+    assert_eq!(results["partition"][1]["transport"], "rtps");
+    assert!(results["partition"][1]["reconverge_ns"].is_u64());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -171,8 +171,11 @@ pub struct PartitionExperiment {
     pub rate_hz: f64,
     /// The agents' anti-entropy announce period, milliseconds.
     pub announce_ms: u64,
-    /// Runs (seeds 1, 2, ...).
+    /// Runs (seeds 1, 2, ...) per transport.
     pub repetitions: u32,
+    /// Transports of the agents (all in this process): `inproc` and/or `rtps`.
+    #[serde(default = "inproc_only")]
+    pub transports: Vec<String>,
 }
 
 /// A set of experiments.
@@ -207,7 +210,7 @@ impl ExperimentSet {
         (self.logs.len() * self.agents.len() * self.seeds.len() * self.transports.len()
             + self.payload.sizes.len()
             + self.faults.variants.len() * self.faults.transports.len()
-            + self.partition.repetitions as usize) as u64
+            + self.partition.repetitions as usize * self.partition.transports.len()) as u64
     }
 }
 
@@ -321,17 +324,22 @@ pub fn run_set(
         }
     }
     let mut partitions = Vec::new();
-    for seed in 1..=u64::from(set.partition.repetitions) {
-        let config = PartitionConfig {
-            agents: set.partition.agents,
-            partition: Duration::from_millis(set.partition.partition_ms),
-            rate_hz: set.partition.rate_hz,
-            announce_period: Duration::from_millis(set.partition.announce_ms),
-            seed,
-            ..PartitionConfig::default()
-        };
-        partitions.push(partition::run(&config).with_context(|| format!("partition seed {seed}"))?);
-        progress(&format!("partition seed {seed}"));
+    for name in &set.partition.transports {
+        let link = link(name, set.rtps_domain)?;
+        for seed in 1..=u64::from(set.partition.repetitions) {
+            let config = PartitionConfig {
+                agents: set.partition.agents,
+                partition: Duration::from_millis(set.partition.partition_ms),
+                rate_hz: set.partition.rate_hz,
+                announce_period: Duration::from_millis(set.partition.announce_ms),
+                seed,
+                link,
+                ..PartitionConfig::default()
+            };
+            partitions
+                .push(partition::run(&config).with_context(|| format!("partition over {} seed {seed}", link.name()))?);
+            progress(&format!("partition {} seed {seed}", link.name()));
+        }
     }
     Ok(Results {
         provenance,

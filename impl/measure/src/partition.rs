@@ -1,5 +1,6 @@
 //! Reconvergence after a partition heals, with real agents (`agent::Agent`, their own threads, anti-entropy) on
-//! the in-process bus behind the seeded fault injector.
+//! the in-process bus or on RTPS (one rustdds participant per agent, in this process, loopback UDP), behind the
+//! seeded fault injector, which cuts the partition on the receiving side.
 //!
 //! One run: `agents` agents join (the first starts alone, the others receive its graph); the first inserts a node;
 //! the last agent is cut off from all others; for `partition` both sides write an attribute of the node at
@@ -15,10 +16,12 @@ use anyhow::Context as _;
 use dsr::{NewNode, attrs};
 use serde::Serialize;
 use transport::fault::{FaultConfig, FaultInjector, FaultPlan};
-use transport::inproc::{Bus, InProcTransport};
-use transport::{Clock, SystemClock, Transport as _};
+use transport::inproc::Bus;
+use transport::rtps::{RtpsConfig, RtpsTransport};
+use transport::{Clock, SystemClock, Transport};
 
 use crate::clock::MonoClock;
+use crate::run::Link;
 
 /// How a partition experiment runs.
 #[derive(Clone, Debug)]
@@ -37,6 +40,8 @@ pub struct PartitionConfig {
     pub faults: FaultConfig,
     /// Give up waiting for equal digests after this long.
     pub timeout: Duration,
+    /// How the agents are connected: [`Link::InProc`] or [`Link::Rtps`] (agents in this process either way).
+    pub link: Link,
 }
 
 impl Default for PartitionConfig {
@@ -49,6 +54,7 @@ impl Default for PartitionConfig {
             seed: 1,
             faults: FaultConfig::default(),
             timeout: Duration::from_secs(10),
+            link: Link::InProc,
         }
     }
 }
@@ -56,6 +62,8 @@ impl Default for PartitionConfig {
 /// What one partition run measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct PartitionResult {
+    /// `inproc` or `rtps`.
+    pub transport: String,
     /// Agents.
     pub agents: u32,
     /// Seed.
@@ -72,20 +80,40 @@ pub struct PartitionResult {
     pub reconverge_ns: Option<u64>,
 }
 
-type FaultyAgent = Agent<FaultInjector<InProcTransport>>;
-
 /// Runs one partition experiment.
 ///
 /// # Errors
-/// Fewer than 2 agents, an agent that cannot start or join, or a write an agent refuses.
+/// Fewer than 2 agents, a link with processes (not supported here), an agent that cannot start or join, or a write
+/// an agent refuses.
 pub fn run(config: &PartitionConfig) -> anyhow::Result<PartitionResult> {
     anyhow::ensure!(config.agents >= 2, "a partition needs at least 2 agents, not {}", config.agents);
+    match config.link {
+        Link::InProc => {
+            let bus = Bus::new();
+            run_on(config, || Ok(bus.attach(1 << 16)))
+        }
+        Link::Rtps { domain_id } => {
+            let topic_prefix = format!("partition{}_{}", std::process::id(), crate::run::clock_id());
+            run_on(config, || {
+                let rtps = RtpsConfig { domain_id, topic_prefix: topic_prefix.clone(), ..RtpsConfig::default() };
+                RtpsTransport::new(rtps).context("cannot create an RTPS participant")
+            })
+        }
+        Link::Processes { .. } => {
+            anyhow::bail!("partition runs put their agents in this process: use inproc or rtps, not rtps-processes")
+        }
+    }
+}
+
+fn run_on<T: Transport + 'static>(
+    config: &PartitionConfig,
+    mut endpoint: impl FnMut() -> anyhow::Result<T>,
+) -> anyhow::Result<PartitionResult> {
     let clock = MonoClock::start();
-    let bus = Bus::new();
     let plan = FaultPlan::new(config.seed, config.faults);
-    let mut agents: Vec<FaultyAgent> = Vec::new();
+    let mut agents: Vec<Agent<FaultInjector<T>>> = Vec::new();
     for i in 0..config.agents {
-        let transport = plan.wrap(bus.attach(1 << 16), Arc::new(clock) as Arc<dyn Clock>);
+        let transport = plan.wrap(endpoint()?, Arc::new(clock) as Arc<dyn Clock>);
         let agent_config = AgentConfig {
             join_wait: Duration::from_millis(if i == 0 { 50 } else { 3000 }),
             join_retry: Duration::from_millis(20),
@@ -94,16 +122,16 @@ pub fn run(config: &PartitionConfig) -> anyhow::Result<PartitionResult> {
             ..AgentConfig::new(AgentId(i + 1))
         };
         let agent = Agent::start(agent_config, transport, Arc::new(SystemClock)).context("cannot start an agent")?;
-        anyhow::ensure!(agent.wait_ready(Duration::from_secs(5)), "agent {} did not get the graph", i + 1);
+        anyhow::ensure!(agent.wait_ready(Duration::from_secs(10)), "agent {} did not get the graph", i + 1);
         agents.push(agent);
     }
     let node = agents[0].insert_node(NewNode::new("object", "partitioned")).context("insert")?;
-    let all_equal = |agents: &[FaultyAgent]| {
+    let all_equal = |agents: &[Agent<FaultInjector<T>>]| {
         let first = agents[0].digest();
         first.is_some() && agents.iter().all(|a| a.digest() == first)
     };
     // Everyone has the node before the cut.
-    let ready_deadline = Instant::now() + Duration::from_secs(5);
+    let ready_deadline = Instant::now() + Duration::from_secs(10);
     while !(all_equal(&agents) && agents.iter().all(|a| a.node(node).is_some())) {
         anyhow::ensure!(Instant::now() < ready_deadline, "the agents did not converge before the partition");
         std::thread::sleep(Duration::from_millis(1));
@@ -138,6 +166,7 @@ pub fn run(config: &PartitionConfig) -> anyhow::Result<PartitionResult> {
         agent.shutdown();
     }
     Ok(PartitionResult {
+        transport: config.link.name().to_owned(),
         agents: config.agents,
         seed: config.seed,
         partition_ms: config.partition.as_millis() as u64,
@@ -157,6 +186,20 @@ mod tests {
         let config = PartitionConfig { partition: Duration::from_millis(150), ..PartitionConfig::default() };
         let result = run(&config).unwrap();
         assert!(result.writes > 0);
+        assert!(result.dropped > 0, "the partition cut nothing: {result:?}");
+        assert!(result.reconverge_ns.is_some(), "{result:?}");
+    }
+
+    #[test]
+    fn agents_on_rtps_reconverge_after_a_healed_partition() {
+        let config = PartitionConfig {
+            partition: Duration::from_millis(150),
+            link: Link::Rtps { domain_id: 79 },
+            timeout: Duration::from_secs(20),
+            ..PartitionConfig::default()
+        };
+        let result = run(&config).unwrap();
+        assert_eq!(result.transport, "rtps");
         assert!(result.dropped > 0, "the partition cut nothing: {result:?}");
         assert!(result.reconverge_ns.is_some(), "{result:?}");
     }

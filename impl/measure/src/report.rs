@@ -234,8 +234,8 @@ fn markdown(r: &Results) -> String {
          replica and RTPS participant, all reading one host clock (`CLOCK_MONOTONIC`). `+faults` marks the seeded \
          fault injector on each receiver's receiving side (in the receiver's own process for `rtps-processes`). The \
          receivers hold a `dsr::Replica` and apply the source's deltas, without the agent layer's envelope, \
-         anti-entropy and lock; the partition runs use real agents (`agent::Agent`, with anti-entropy) on the \
-         in-process bus. Medians and percentiles of all runs, never a best run.\n"
+         anti-entropy and lock; the partition runs use real agents (`agent::Agent`, with anti-entropy) in one \
+         process, on the in-process bus or RTPS as their table says. Medians and percentiles of all runs, never a best run.\n"
     );
     let _ = writeln!(md, "{}\n", SECTIONS[0]);
     let _ = writeln!(md, "| | |\n|---|---|");
@@ -461,17 +461,19 @@ fn markdown(r: &Results) -> String {
     }
     let _ = writeln!(
         md,
-        "\nAfter a healed partition (real agents with anti-entropy, the last agent cut off while both sides write, then \
-         healed; time from the heal until every digest is equal; the announce period bounds it):\n"
+        "\nAfter a healed partition (real agents with anti-entropy, all in this process, on the in-process bus or one \
+         RTPS participant each; the last agent cut off while both sides write, then healed; time from the heal until \
+         every digest is equal; the announce period bounds it):\n"
     );
     let _ = writeln!(
         md,
-        "| seed | agents | partition ms | announce ms | writes during it | samples cut | reconverged after ms |\n|---:|---:|---:|---:|---:|---:|---:|"
+        "| transport | seed | agents | partition ms | announce ms | writes during it | samples cut | reconverged after ms |\n|---|---:|---:|---:|---:|---:|---:|---:|"
     );
     for x in &r.partition {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            x.transport,
             x.seed,
             x.agents,
             x.partition_ms,
@@ -481,18 +483,22 @@ fn markdown(r: &Results) -> String {
             x.reconverge_ns.map_or_else(|| "not within the timeout".to_owned(), |ns| format!("{:.1}", ms(ns)))
         );
     }
-    let mut times: Vec<u64> = r.partition.iter().filter_map(|x| x.reconverge_ns).collect();
-    times.sort_unstable();
-    if let (Some(first), Some(last)) = (times.first(), times.last()) {
-        let _ = writeln!(
-            md,
-            "\nMedian {:.1} ms, min {:.1} ms, max {:.1} ms over {} runs.\n",
-            ms(times[times.len() / 2]),
-            ms(*first),
-            ms(*last),
-            times.len()
-        );
+    for transport in &r.set.partition.transports {
+        let mut times: Vec<u64> =
+            r.partition.iter().filter(|x| &x.transport == transport).filter_map(|x| x.reconverge_ns).collect();
+        times.sort_unstable();
+        if let (Some(first), Some(last)) = (times.first(), times.last()) {
+            let _ = writeln!(
+                md,
+                "\n{transport}: median {:.1} ms, min {:.1} ms, max {:.1} ms over {} runs.",
+                ms(times[times.len() / 2]),
+                ms(*first),
+                ms(*last),
+                times.len()
+            );
+        }
     }
+    let _ = writeln!(md);
 
     // CPU.
     let _ = writeln!(md, "{}\n", SECTIONS[6]);
@@ -535,7 +541,7 @@ fn markdown(r: &Results) -> String {
         md,
         "- The full agent layer (`agent::Agent`: envelope, anti-entropy, lock) on the measured path: receivers apply \
          the source's deltas to a bare `dsr::Replica`.\n\
-         - Partitions over RTPS (the partition runs use real agents on the in-process bus).\n\
+         - Partitions with agents as separate processes (the partition runs put their agents in one process).\n\
          - BICA statistics of the detector roles and the scheduler timeline of a detector under an injected overload.\n\
          - MCAP output of a run (metrics as JSON-schema channels, graph deltas) for Foxglove.\n"
     );
