@@ -81,6 +81,10 @@ fn a_log_replays_over_rtps_into_agent_processes() {
     assert_eq!(summary["digests_equal"], true);
     let roles: Vec<_> = summary["agent_reports"].as_array().unwrap().iter().map(|a| a["role"].clone()).collect();
     assert_eq!(roles, ["bridge", "camera-detector", "plain"]);
+    let detector = &summary["agent_reports"][1];
+    assert!(detector["components_error"].is_null(), "{detector}");
+    let components = detector["components"].as_array().unwrap();
+    assert!(components.iter().any(|c| c["runs"].as_u64().unwrap() > 0), "{detector}");
 }
 
 #[test]

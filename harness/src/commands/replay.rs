@@ -275,6 +275,24 @@ fn text(s: &Summary) -> String {
             "  agent {:<3}     {:<15} {:>6} nodes  digest {}  {} samples received, {} sent",
             a.id, a.role, a.nodes, a.digest, a.samples_received, a.samples_sent
         );
+        for c in &a.components {
+            let _ = writeln!(
+                out,
+                "      {:>6.1} of {:>6.1} Hz {:>6} runs {:>5} misses {:>5} skipped  lateness p99 {:>7.2} ms  step p99 \
+                 {:>6.2} ms  {}",
+                c.achieved_hz,
+                c.nominal_hz,
+                c.runs,
+                c.misses,
+                c.skipped_releases,
+                c.lateness_p99_ms,
+                c.wall_p99_ms,
+                c.name
+            );
+        }
+        if let Some(error) = &a.components_error {
+            let _ = writeln!(out, "      BICA statistics unavailable: {error}");
+        }
     }
     if let Some(ms) = s.converged_ms {
         let _ = writeln!(

@@ -6,8 +6,9 @@
 //! the agent processes start with `--control-stdin --json-status` and report ready once they hold the graph; the
 //! log is played at its pace; then every role is told to `quiesce` (its runtime stops writing, the agent keeps
 //! replicating) and the command waits until every agent reports the bridge's digest — the time from the end of
-//! the replay to that moment is the end-of-replay convergence window. Closing the processes' standard input
-//! stops them.
+//! the replay to that moment is the end-of-replay convergence window. Just before the quiesce, the bridge asks
+//! every role for its BICA statistics (`runtime.components`, a remote call over the same DDS engine): frequency
+//! achieved, misses, skipped releases, lateness. Closing the processes' standard input stops them.
 
 use std::collections::BTreeMap;
 use std::io::{BufRead as _, BufReader, Write as _};
@@ -63,6 +64,27 @@ pub struct RtpsReplay {
     pub settle: Duration,
 }
 
+/// BICA statistics of one component of a role, fetched over a remote call at the end of the replay.
+#[derive(Debug, Clone, Serialize)]
+pub struct ComponentSummary {
+    /// Component type name.
+    pub name: String,
+    /// Nominal frequency.
+    pub nominal_hz: f64,
+    /// Frequency achieved.
+    pub achieved_hz: f64,
+    /// Steps run.
+    pub runs: u64,
+    /// Deadline misses.
+    pub misses: u64,
+    /// Releases skipped after overruns.
+    pub skipped_releases: u64,
+    /// 99th percentile of lateness, ms.
+    pub lateness_p99_ms: f64,
+    /// 99th percentile of wall time per step, ms.
+    pub wall_p99_ms: f64,
+}
+
 /// One agent's last report.
 #[derive(Debug, Clone, Serialize)]
 pub struct AgentReport {
@@ -78,6 +100,12 @@ pub struct AgentReport {
     pub samples_received: u64,
     /// Samples it published.
     pub samples_sent: u64,
+    /// A role's BICA statistics just before it was quiesced (`runtime.components` over a remote call).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub components: Vec<ComponentSummary>,
+    /// Why the statistics are missing, if the call failed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub components_error: Option<String>,
 }
 
 /// What an RTPS replay did.
@@ -171,7 +199,35 @@ fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentReport {
         digest: status["digest"].as_str().unwrap_or("none").to_owned(),
         samples_received: status["samples_received"].as_u64().unwrap_or(0),
         samples_sent: status["samples_sent"].as_u64().unwrap_or(0),
+        components: Vec::new(),
+        components_error: None,
     }
+}
+
+/// A role's BICA statistics, by a remote call from the bridge agent.
+fn role_statistics(
+    bridge: &agent::Agent<transport::rtps::RtpsTransport>,
+    id: u32,
+) -> Result<Vec<ComponentSummary>, String> {
+    let reply: bica::service::ComponentsReply = bridge
+        .call(agent::AgentId(id), bica::service::COMPONENTS, &(), Duration::from_secs(2))
+        .map_err(|e| e.to_string())?;
+    let ms = |ns: u64| ns as f64 / 1e6;
+    Ok(reply
+        .statistics
+        .components
+        .into_iter()
+        .map(|c| ComponentSummary {
+            name: c.name,
+            nominal_hz: c.nominal_hz,
+            achieved_hz: c.achieved_hz,
+            runs: c.counters.runs,
+            misses: c.counters.misses,
+            skipped_releases: c.counters.skipped_releases,
+            lateness_p99_ms: ms(c.lateness.p99_ns),
+            wall_p99_ms: ms(c.wall.p99_ns),
+        })
+        .collect())
 }
 
 /// Plays `log` from a bridge agent in this process to `config.agents - 1` agent processes over RTPS.
@@ -218,6 +274,10 @@ pub fn replay(
     let seconds = started.elapsed().as_secs_f64();
     let ended = Instant::now();
     let bridge_bytes = bridge.status().transport.payload_bytes_sent - before.payload_bytes_sent;
+    let mut statistics = BTreeMap::new();
+    for proc in procs.iter().filter(|p| p.role != "plain") {
+        statistics.insert(proc.id, role_statistics(&bridge, proc.id));
+    }
     for proc in &mut procs {
         if proc.role != "plain"
             && let Some(stdin) = proc.stdin.as_mut()
@@ -247,10 +307,18 @@ pub fn replay(
         digest: bridge.digest().map_or_else(|| "none".to_owned(), |d| d.to_string()),
         samples_received: status.transport.samples_received,
         samples_sent: status.transport.samples_sent,
+        components: Vec::new(),
+        components_error: None,
     }];
     for proc in &procs {
         let status = last.get(&proc.id).cloned().unwrap_or_default();
-        agents.push(report(proc.id, &proc.role, &status));
+        let mut agent = report(proc.id, &proc.role, &status);
+        match statistics.remove(&proc.id) {
+            Some(Ok(components)) => agent.components = components,
+            Some(Err(error)) => agent.components_error = Some(error),
+            None => {}
+        }
+        agents.push(agent);
     }
     for proc in &mut procs {
         proc.stdin = None;
