@@ -256,6 +256,84 @@ impl<T: Transport> Transport for FaultInjector<T> {
     }
 }
 
+/// A fault specification that does not parse; the message names the part and what is wrong.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("fault specification {spec:?}: {detail}")]
+pub struct FaultSpecError {
+    /// The whole specification.
+    pub spec: String,
+    /// What is wrong, and where.
+    pub detail: String,
+}
+
+/// Parses a command-line fault specification: comma-separated `key=value` items, e.g.
+/// `loss=0.1,duplicate=0.05,reorder=0.2,reorder-ms=10,delay-ms=0-2`. Keys: `loss`, `duplicate`, `reorder`
+/// (probabilities in 0..=1), `reorder-ms` (largest extra delay), `delay-ms` (`A-B` or one value: every sample held
+/// that long, uniform), `max-held` (samples held at once). `none` (or an empty string) is no fault.
+///
+/// ```
+/// use transport::fault::FaultConfig;
+/// let config: FaultConfig = "loss=0.1,delay-ms=1-3".parse().unwrap();
+/// assert_eq!(config.loss, 0.1);
+/// assert_eq!(config.delay_ns, (1_000_000, 3_000_000));
+/// assert!("loss=2".parse::<FaultConfig>().unwrap_err().to_string().contains("between 0 and 1"));
+/// ```
+impl std::str::FromStr for FaultConfig {
+    type Err = FaultSpecError;
+
+    fn from_str(spec: &str) -> Result<Self, FaultSpecError> {
+        let error = |detail: String| FaultSpecError { spec: spec.to_owned(), detail };
+        let mut config = FaultConfig::default();
+        if spec.trim().is_empty() || spec.trim() == "none" {
+            return Ok(config);
+        }
+        for item in spec.split(',').map(str::trim) {
+            let (key, value) = item.split_once('=').ok_or_else(|| error(format!("{item:?} is not key=value")))?;
+            let number = |text: &str| -> Result<f64, FaultSpecError> {
+                text.trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| error(format!("{key}: {text:?} is not a non-negative number")))
+            };
+            let probability = |text: &str| -> Result<f64, FaultSpecError> {
+                let p = number(text)?;
+                if p > 1.0 {
+                    return Err(error(format!("{key}: {p} is not a probability between 0 and 1")));
+                }
+                Ok(p)
+            };
+            let ns = |ms: f64| (ms * 1e6) as u64;
+            match key.trim() {
+                "loss" => config.loss = probability(value)?,
+                "duplicate" => config.duplicate = probability(value)?,
+                "reorder" => config.reorder = probability(value)?,
+                "reorder-ms" => config.reorder_ns = ns(number(value)?),
+                "delay-ms" => {
+                    let (low, high) = match value.split_once('-') {
+                        Some((low, high)) => (number(low)?, number(high)?),
+                        None => (number(value)?, number(value)?),
+                    };
+                    if high < low {
+                        return Err(error(format!("delay-ms: {value:?} ends before it starts")));
+                    }
+                    config.delay_ns = (ns(low), ns(high));
+                }
+                "max-held" => {
+                    config.max_held =
+                        value.trim().parse().map_err(|_| error(format!("max-held: {value:?} is not a count")))?;
+                }
+                other => {
+                    return Err(error(format!(
+                        "unknown key {other:?} (loss, duplicate, reorder, reorder-ms, delay-ms, max-held)"
+                    )));
+                }
+            }
+        }
+        Ok(config)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -360,5 +438,37 @@ mod tests {
         clock.advance(10);
         assert_eq!(drain(&b), vec![0, 1, 2]);
         assert_eq!(b.stats().dropped_injected, 3);
+    }
+
+    #[test]
+    fn fault_specifications_parse_or_say_what_is_wrong() {
+        let config: FaultConfig =
+            "loss=0.05, duplicate=0.1,reorder=0.2,reorder-ms=10,delay-ms=2,max-held=9".parse().unwrap();
+        assert_eq!(
+            config,
+            FaultConfig {
+                loss: 0.05,
+                duplicate: 0.1,
+                reorder: 0.2,
+                reorder_ns: 10_000_000,
+                delay_ns: (2_000_000, 2_000_000),
+                max_held: 9
+            }
+        );
+        assert_eq!("none".parse::<FaultConfig>().unwrap(), FaultConfig::default());
+        assert_eq!("".parse::<FaultConfig>().unwrap(), FaultConfig::default());
+        for (bad, says) in [
+            ("loss", "is not key=value"),
+            ("loss=x", "is not a non-negative number"),
+            ("loss=-0.1", "is not a non-negative number"),
+            ("duplicate=1.5", "between 0 and 1"),
+            ("delay-ms=3-1", "ends before it starts"),
+            ("jitter=1", "unknown key \"jitter\""),
+            ("max-held=-1", "is not a count"),
+            ("loss=NaN", "is not a non-negative number"),
+        ] {
+            let error = bad.parse::<FaultConfig>().unwrap_err().to_string();
+            assert!(error.contains(says) && error.contains(bad), "{bad}: {error}");
+        }
     }
 }
