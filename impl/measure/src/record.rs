@@ -366,6 +366,8 @@ impl<W: Write + Seek> RunRecorder<W> {
             .library(format!("cortex-rs measure {}", env!("CARGO_PKG_VERSION")))
             .chunk_size(Some(CHUNK_BYTES));
         let mut writer = options.create(out).context("cannot start the MCAP file")?;
+        // Metadata first: a metadata record closes the open chunk, and the schemas belong with the first messages.
+        writer.write_metadata(&Metadata { name: RUN_METADATA.to_owned(), metadata })?;
         let mut metric_channels = BTreeMap::new();
         for metric in Metric::ALL {
             let schema = serde_json::to_vec(&metric.schema())?;
@@ -373,7 +375,6 @@ impl<W: Write + Seek> RunRecorder<W> {
             let channel = writer.add_channel(schema_id, metric.topic(), "json", &BTreeMap::new())?;
             metric_channels.insert(metric, channel);
         }
-        writer.write_metadata(&Metadata { name: RUN_METADATA.to_owned(), metadata })?;
         Ok(RunRecorder {
             writer,
             metric_channels,
@@ -707,7 +708,7 @@ pub struct RecordedRun {
 
 fn slug(text: &str) -> String {
     let mut out = String::new();
-    for c in text.chars() {
+    for c in text.replace(".mcap", "").chars() {
         if c.is_ascii_alphanumeric() || c == '.' {
             out.push(c.to_ascii_lowercase());
         } else if !out.ends_with('-') {
@@ -983,6 +984,7 @@ mod tests {
         let summary = mcap::Summary::read(bytes).unwrap().expect("a summary section");
         let stats = summary.stats.clone().expect("statistics");
         assert!(!summary.chunk_indexes.is_empty(), "chunk indexes");
+        assert!(summary.chunk_indexes.iter().all(|c| !c.message_index_offsets.is_empty()), "no chunk without messages");
         assert_eq!(summary.metadata_indexes.len(), 1);
         let metadata = mcap::read::metadata(bytes, &summary.metadata_indexes[0]).unwrap();
         assert_eq!(metadata.name, RUN_METADATA);
@@ -1187,6 +1189,13 @@ mod tests {
         let error = recorder.published(4_000, 10).unwrap_err();
         assert!(error.to_string().contains("never decrease"), "{error}");
         assert!(recorder.delta(0, 6_000, b"x").unwrap_err().to_string().contains("no delta channel"));
+    }
+
+    #[test]
+    fn file_names_are_plain_and_bounded() {
+        assert_eq!(slug("sick_tim7xx_scan_10s.mcap inproc N=3 seed 7"), "sick-tim7xx-scan-10s-inproc-n-3-seed-7");
+        assert_eq!(slug("synthetic 16 B @ 200 Hz N=3"), "synthetic-16-b-200-hz-n-3");
+        assert_eq!(slug(&"x".repeat(200)).len(), 80);
     }
 
     #[test]
