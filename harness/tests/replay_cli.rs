@@ -2,6 +2,7 @@
 //! agents to equal digests, a damaged file is an error that says where (or a recovered prefix with `--recover`), a
 //! log replays over RTPS from the bridge into agent processes (plain, and a BICA role) to equal digests, and a log
 //! that does not match the manifest fails the check.
+//! `--out DIR` records the run as `DIR/run.mcap`, which both MCAP readers open and whose deltas rebuild the graph.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -111,4 +112,84 @@ fn datasets_verify_passes_and_catches_a_changed_file() {
     assert!(stdout.contains("sick_tim7xx_scan_10s.mcap                            ok"), "{stdout}");
     assert!(stdout.contains("euroc_v1_01_easy_cam0_1s.mcap                        MISSING"), "{stdout}");
     assert!(String::from_utf8_lossy(&out.stderr).contains("3 of 4 files"), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn replay_out_records_a_run_that_rebuilds_the_graph() {
+    let dir = std::env::temp_dir().join(format!("cortex-replay-out-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let log = repo("datasets/logs/husky_gps_imu_odom_robot_localization_test1.mcap");
+    let args = ["replay", &log, "--agents", "3", "--rate", "max", "--json", "--out", dir.to_str().unwrap()];
+    let out = cortex(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    let deltas = summary["deltas"].as_u64().unwrap();
+    assert!(deltas > 100, "{summary}");
+    let path = dir.join("run.mcap");
+    assert_eq!(summary["recording"]["path"], path.display().to_string());
+    assert_eq!(summary["recording"]["messages"]["/dsr/deltas"], deltas);
+
+    // The `mcap` crate: an indexed file with statistics that agree with the summary printed.
+    let bytes = std::fs::read(&path).unwrap();
+    let index = mcap::Summary::read(&bytes).unwrap().expect("a summary section");
+    let stats = index.stats.expect("statistics");
+    assert!(!index.chunk_indexes.is_empty());
+    let mut topics: Vec<(String, String, String)> = index
+        .channels
+        .values()
+        .map(|c| {
+            let schema = c.schema.as_ref().map_or(String::new(), |s| format!("{} {}", s.name, s.encoding));
+            (c.topic.clone(), c.message_encoding.clone(), schema)
+        })
+        .collect();
+    topics.sort();
+    let expected = [
+        ("/dsr/deltas", "dsr-delta-v1", "dsr.Delta "),
+        ("/metrics/bandwidth", "json", "cortex.BandwidthSample jsonschema"),
+        ("/metrics/convergence", "json", "cortex.ConvergenceWindow jsonschema"),
+        ("/metrics/latency", "json", "cortex.WriteLatency jsonschema"),
+        ("/metrics/summary", "json", "cortex.RunSummary jsonschema"),
+    ];
+    let expected: Vec<(String, String, String)> =
+        expected.iter().map(|(a, b, c)| ((*a).to_owned(), (*b).to_owned(), (*c).to_owned())).collect();
+    assert_eq!(topics, expected);
+    let mut last = 0;
+    let mut latencies = 0;
+    let mut recorded_summary = None;
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        assert!(message.log_time >= last);
+        last = message.log_time;
+        if message.channel.message_encoding == "json" {
+            let schema: serde_json::Value =
+                serde_json::from_slice(&message.channel.schema.as_ref().unwrap().data).unwrap();
+            let value: serde_json::Value = serde_json::from_slice(&message.data).unwrap();
+            for key in schema["required"].as_array().unwrap() {
+                assert!(value.get(key.as_str().unwrap()).is_some(), "{} lacks {key}", message.channel.topic);
+            }
+            match message.channel.topic.as_str() {
+                "/metrics/latency" => latencies += 1,
+                "/metrics/summary" => recorded_summary = Some(value),
+                _ => {}
+            }
+        }
+    }
+    assert_eq!(stats.message_count, stats.channel_message_counts.values().sum::<u64>());
+    assert_eq!(latencies, deltas * 2, "one latency per delta and receiver");
+    let recorded_summary = recorded_summary.expect("a summary message");
+    assert_eq!(recorded_summary["digests"], summary["digests"]);
+    assert_eq!(recorded_summary["writes"], deltas);
+
+    // The project's reader: the deltas, applied in order to an empty replica, give the bridge's digest.
+    let log = replay::log::Log::open(&path, replay::log::ReadOptions::default()).unwrap();
+    let mut replica = dsr::Replica::with_dictionary(dsr::ReplicaId(9), replay::bridge::dictionary().unwrap());
+    let mut applied = 0;
+    for message in log.messages.iter().filter(|m| m.channel.topic == "/dsr/deltas") {
+        assert_eq!(message.channel.type_name(), "dsr.Delta");
+        replica.apply(&dsr::Delta::decode(&message.data).unwrap()).unwrap();
+        applied += 1;
+    }
+    assert_eq!(applied, deltas);
+    assert_eq!(replica.digest().to_string(), summary["digests"][0].as_str().unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
 }

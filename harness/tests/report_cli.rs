@@ -1,6 +1,7 @@
 //! `cortex report` end to end on a tiny experiment file: every figure (SVG and PNG) and every section of
 //! `report.md` exists, `results.json` carries the schema version and provenance, and the report says which
-//! transport its figures used. Also: a malformed experiment file is refused with a message naming the field.
+//! transport its figures used; every run is recorded as an MCAP file under `runs/` that the `mcap` crate and the
+//! project's reader open, linked from the report. Also: a malformed experiment file is refused with a message naming the field.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -111,6 +112,37 @@ fn tiny_report_has_every_figure_and_section() {
     assert!(results["partition"][0]["reconverge_ns"].is_u64());
     assert_eq!(results["partition"][1]["transport"], "rtps");
     assert!(results["partition"][1]["reconverge_ns"].is_u64());
+
+    // One MCAP file per replay, payload and fault run, each linked from report.md.
+    let mut runs: Vec<PathBuf> = std::fs::read_dir(out.join("runs")).unwrap().map(|e| e.unwrap().path()).collect();
+    runs.sort();
+    assert_eq!(runs.len(), 8 + 2 + 4, "{runs:?}");
+    let mut replay_latencies = 0;
+    for path in &runs {
+        let name = path.file_name().unwrap().to_str().unwrap();
+        assert!(report.contains(&format!("](runs/{name})")), "report.md does not link {name}");
+        let bytes = std::fs::read(path).unwrap();
+        let index = mcap::Summary::read(&bytes).unwrap().expect("a summary section");
+        assert_eq!(index.channels.len(), 4, "{name}: the metric channels");
+        let mut summaries = Vec::new();
+        for message in mcap::MessageStream::new(&bytes).unwrap() {
+            let message = message.unwrap();
+            let value: serde_json::Value = serde_json::from_slice(&message.data).unwrap();
+            match message.channel.topic.as_str() {
+                "/metrics/summary" => summaries.push(value),
+                "/metrics/latency" if name.starts_with("replay") => replay_latencies += 1,
+                _ => {}
+            }
+        }
+        assert_eq!(summaries.len(), 1, "{name}");
+        let log = replay::log::Log::open(path, replay::log::ReadOptions::default()).unwrap();
+        assert_eq!(log.messages.len() as u64, index.stats.unwrap().message_count, "{name}");
+        let latency_count = summaries[0]["latency"]["count"].as_u64().unwrap();
+        assert!(latency_count > 0, "{name}");
+    }
+    let expected: u64 =
+        results["replay"].as_array().unwrap().iter().map(|r| r["latency"]["count"].as_u64().unwrap()).sum();
+    assert_eq!(replay_latencies, expected, "one latency message per (write, receiver) of every replay run");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -10,7 +10,13 @@
 //! `--roles` (see [`super::replay_rtps`]). The summary gives messages by type, unknown and skipped ones, bytes,
 //! deltas, throughput and whether the final digests are equal (exit code 1 if they are not); over RTPS also each
 //! agent's graph and the time from the end of the replay until every agent had the bridge's digest.
+//!
+//! With `--out DIR` an in-process run is also recorded as `DIR/run.mcap` (`measure::record`), for Foxglove: every
+//! delta the bridge published (its encoded bytes, at its publication time on the run's clock), the latency of each
+//! delta at each in-process receiver, each delta's convergence window, published bytes per 100 ms and the run's
+//! summary.
 
+use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -19,6 +25,8 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail};
 use clap::{Args, ValueEnum};
 use dsr::{Replica, ReplicaId};
+use measure::record::{self, RecordingSink, RunRecorder, RunSummary};
+use measure::{MonoClock, PayloadClass, Percentiles, Provenance};
 use replay::inproc::{self, InProcNetwork};
 use replay::log::{Log, ReadOptions};
 use replay::{Bridge, BridgeOptions, BridgeStats, Pacer, Rate};
@@ -78,6 +86,10 @@ pub struct ReplayArgs {
     /// Print stable, machine-readable JSON instead of text.
     #[arg(long)]
     json: bool,
+    /// Also record the run as `DIR/run.mcap` (created): the deltas as published, per-delta latencies and
+    /// convergence windows, bandwidth and the summary, for Foxglove.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
 }
 
 /// What a replay did.
@@ -108,6 +120,17 @@ struct Summary {
     /// Over RTPS: milliseconds from the end of the replay until every agent had the bridge's digest.
     #[serde(skip_serializing_if = "Option::is_none")]
     converged_ms: Option<f64>,
+    /// What `--out` recorded (in-process runs).
+    recording: Option<Recording>,
+}
+
+/// What `--out` recorded.
+#[derive(Debug, Serialize)]
+struct Recording {
+    path: String,
+    messages: BTreeMap<&'static str, u64>,
+    latency: Percentiles,
+    convergence: Percentiles,
 }
 
 /// Runs `cortex replay`.
@@ -133,26 +156,71 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     if args.transport == Transport::Rtps {
+        if args.out.is_some() {
+            bail!("--out records in-process replays (--transport inproc); over RTPS, `cortex report` measures runs");
+        }
         return run_rtps(&args, &log);
     }
     let dictionary = replay::bridge::dictionary().context("bridge dictionary")?;
     let mut replica = Replica::with_dictionary(ReplicaId(1), dictionary.clone());
     let mut network = InProcNetwork::new(args.agents - 1, 2, &dictionary, args.seed, args.window);
     let mut bridge = Bridge::new(BridgeOptions { topics: args.topics.clone(), opaque: args.opaque });
-    let origin = Instant::now();
-    let clock = move || origin.elapsed().as_nanos() as u64;
-    let pacer = Pacer::new(&log.messages, args.rate, args.loops, clock);
-    let wait = |due_ns: u64| {
-        let now = origin.elapsed().as_nanos() as u64;
-        if due_ns > now {
-            std::thread::sleep(Duration::from_nanos(due_ns - now));
+    let clock = MonoClock::start();
+    let pacer = Pacer::new(&log.messages, args.rate, args.loops, move || clock.now_ns());
+    // The recording labels each delta with the payload class of the message it came from, set here as the message
+    // is taken from the pacer, just before the bridge ingests it and publishes its deltas.
+    let class = Cell::new(PayloadClass::Small);
+    let paced = pacer.inspect(|item| class.set(PayloadClass::of_schema(item.message.channel.type_name())));
+    let wait = |due_ns: u64| clock.sleep_until(due_ns);
+    let started = Instant::now();
+    let (driven, live) = match &args.out {
+        None => (inproc::drive(paced, &mut bridge, &mut replica, &mut network, wait).context("replay")?, None),
+        Some(dir) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            let path = dir.join("run.mcap");
+            let mut provenance = Provenance::current();
+            provenance.seeds.insert("delivery".to_owned(), args.seed);
+            let mut metadata = record::provenance_metadata(&provenance);
+            metadata.insert("run".to_owned(), format!("cortex replay {}", args.file.display()));
+            metadata.insert("agents".to_owned(), args.agents.to_string());
+            metadata.insert("delivery".to_owned(), format!("in process, seed {}, window {}", args.seed, args.window));
+            metadata.insert("loops".to_owned(), args.loops.to_string());
+            let recorder = RunRecorder::create(&path, metadata)?;
+            let mut sink = RecordingSink::new(&mut network, recorder, BRIDGE_DICTIONARY, clock, &class)?;
+            let driven = inproc::drive(paced, &mut bridge, &mut replica, &mut sink, wait).context("replay")?;
+            (driven, Some((path, sink.finish())))
         }
     };
-    let started = Instant::now();
-    let driven = inproc::drive(pacer, &mut bridge, &mut replica, &mut network, wait).context("replay")?;
     let seconds = started.elapsed().as_secs_f64();
     let (digests, digests_equal) = inproc::digests(&replica, &network);
     let stats = network.stats();
+    let digest_strings: Vec<String> = digests.iter().map(ToString::to_string).collect();
+    let recording = match live {
+        None => None,
+        Some((path, (mut recorder, live))) => {
+            let latency = live.latency.overall();
+            let convergence = Percentiles::of(&live.convergence);
+            let summary = RunSummary {
+                run: args.file.file_name().map_or_else(|| log.file.clone(), |n| n.to_string_lossy().into_owned()),
+                transport: "inproc".to_owned(),
+                agents: args.agents,
+                seed: args.seed,
+                writes: live.writes,
+                published_bytes: live.published_bytes,
+                latency,
+                latency_by_class: live.latency.by_class().into_iter().map(|(c, p)| (c.name().to_owned(), p)).collect(),
+                convergence,
+                writes_not_everywhere: live.writes_not_everywhere,
+                end_convergence_ns: digests_equal.then(|| live.last_apply_ns.saturating_sub(live.last_publish_ns)),
+                digests_equal,
+                digests: digest_strings.clone(),
+                writes_recorded: live.writes,
+            };
+            recorder.summary(clock.now_ns(), &summary)?;
+            let messages = record::finish_file(recorder).with_context(|| format!("cannot write {}", path.display()))?;
+            Some(Recording { path: path.display().to_string(), messages, latency, convergence })
+        }
+    };
     let summary = Summary {
         file: args.file.display().to_string(),
         transport: "inproc",
@@ -171,10 +239,11 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         deltas: driven.deltas,
         delta_bytes: stats.encoded_bytes,
         deliveries: stats.deliveries,
-        digests: digests.iter().map(ToString::to_string).collect(),
+        digests: digest_strings,
         digests_equal,
         agent_reports: Vec::new(),
         converged_ms: None,
+        recording,
     };
     finish(&args, &summary)
 }
@@ -231,6 +300,7 @@ fn run_rtps(args: &ReplayArgs, log: &Log) -> anyhow::Result<()> {
         digests_equal: outcome.digests_equal,
         agent_reports: outcome.agents.clone(),
         converged_ms: outcome.converged_ms,
+        recording: None,
     };
     finish(args, &summary)
 }
@@ -302,5 +372,21 @@ fn text(s: &Summary) -> String {
     }
     let verdict = if s.digests_equal { "equal" } else { "DIFFER" };
     let _ = writeln!(out, "  digests       {verdict}: {}", s.digests.join(" "));
+    if let Some(r) = &s.recording {
+        let count = |topic: &str| r.messages.get(topic).copied().unwrap_or(0);
+        let _ = writeln!(
+            out,
+            "  recorded      {}: {} deltas, {} latencies (p50 {:.3} ms, p99 {:.3} ms), {} convergence windows",
+            r.path,
+            count(record::DELTA_TOPIC),
+            count(record::Metric::Latency.topic()),
+            r.latency.p50_ns as f64 / 1e6,
+            r.latency.p99_ns as f64 / 1e6,
+            count(record::Metric::Convergence.topic())
+        );
+    }
     out
 }
+
+/// How a replica gets the dictionary the recorded deltas need.
+const BRIDGE_DICTIONARY: &str = "replay::bridge::dictionary()";

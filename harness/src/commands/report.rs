@@ -3,7 +3,8 @@
 //! Reads an experiment file (`experiments/paper.toml` by default; TOML, see `measure::experiment`), runs its
 //! `quick` set (the default, at most 5 minutes on 2 cores) or its `full` sweep (`--full`) with a progress bar, and
 //! writes into `--out` (default `reports/<name>-<mode>`): `results.json` (versioned schema with commit, rustc,
-//! machine, seeds and dataset checksums), the figures as SVG and PNG, and `report.md`. Every run is in process;
+//! machine, seeds and dataset checksums), the figures as SVG and PNG, one MCAP recording per run under `runs/`
+//! (metrics on JSON-schema channels, for Foxglove; `measure::record`) and `report.md`. Every run is in process;
 //! the report says so on every figure.
 
 use std::path::PathBuf;

@@ -10,6 +10,18 @@
 //! they can, so a one-attribute `f32` update is about 40 bytes. Decoding checks structure (ids, dots, names,
 //! limits) and returns a [`DeltaError`] that says where; it never panics. Type checks against the receiving
 //! replica's dictionary happen in [`crate::Replica::apply`].
+//!
+//! Layout of an encoded delta, in order:
+//!
+//! 1. one header byte: `WIRE_VERSION << 3`, or-ed with flags `1` (a snapshot), `2` (a clock follows the body) and
+//!    `4` (a snapshot's applied operations follow);
+//! 2. the body, postcard-encoded: the origin (replica, first dot, number of dots) if any, the causal context (version
+//!    vector, then out-of-order dots), tombstoned node ids, then the node and edge entries of the dot store;
+//! 3. if flag `2`: the sender's clock stamp, 8 bytes little-endian;
+//! 4. if flag `4`: the applied operations (a version vector and out-of-order dots), postcard-encoded.
+//!
+//! Nothing follows; [`Delta::decode`] refuses trailing bytes. Run recordings carry exactly these bytes as MCAP
+//! messages with message encoding `dsr-delta-v1` (version 1 of this layout).
 
 use serde::{Deserialize, Serialize};
 use smallvec::SmallVec;

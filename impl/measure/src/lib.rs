@@ -22,6 +22,8 @@
 //! - [`provenance`] — commit, rustc, machine (cores, memory, CPU model from `/proc`), dataset checksums.
 //!
 //! - [`report`] — `results.json`, the figures and `report.md` of an experiment set.
+//! - [`record`] — runs as MCAP files that Foxglove opens: metrics on JSON-schema channels, the graph deltas as
+//!   published.
 //!
 //! Results serialise to JSON with [`SCHEMA_VERSION`]; a change that renames or removes a field bumps it.
 
@@ -32,6 +34,7 @@ pub mod latency;
 pub mod partition;
 pub mod process;
 pub mod provenance;
+pub mod record;
 pub mod report;
 pub mod run;
 pub mod workload;

@@ -1,5 +1,5 @@
-//! The report of an experiment set: `results.json` (the versioned schema), the figures (SVG and PNG) and
-//! `report.md`, which puts every number beside how it was obtained and beside the DSR_d paper's claims and the
+//! The report of an experiment set: `results.json` (the versioned schema), the figures (SVG and PNG), one MCAP
+//! recording per run under `runs/` (see [`crate::record`]) and `report.md`, which puts every number beside how it was obtained and beside the DSR_d paper's claims and the
 //! published figures of the C++ implementation (labelled as measured elsewhere).
 
 use std::collections::BTreeMap;
@@ -19,7 +19,7 @@ pub const FIGURES: [&str; 4] =
     ["latency_cdf_by_agents", "latency_vs_payload", "bandwidth_vs_agents", "convergence_windows"];
 
 /// Headings of the sections of `report.md`, in order.
-pub const SECTIONS: [&str; 9] = [
+pub const SECTIONS: [&str; 10] = [
     "## How this report was obtained",
     "## Beside the paper's claims and the C++ implementation",
     "## Latency by number of agents",
@@ -29,6 +29,7 @@ pub const SECTIONS: [&str; 9] = [
     "## CPU and memory",
     "## Not measured yet",
     "## Datasets",
+    "## Runs as MCAP",
 ];
 
 fn ms(ns: u64) -> f64 {
@@ -67,7 +68,7 @@ fn cdf_ms(h: &Histogram<u64>) -> Vec<(f64, f64)> {
     latency::cdf(h, 200).into_iter().map(|(ns, q)| (ms(ns), q)).collect()
 }
 
-/// Writes `results.json`, the figures and `report.md` into `out`.
+/// Writes `results.json`, the figures, the runs as MCAP (`runs/*.mcap`) and `report.md` into `out`.
 ///
 /// # Errors
 /// A file that cannot be written or a figure that cannot be drawn.
@@ -198,7 +199,8 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
     };
     figures::render(&chart, out, FIGURES[3])?;
 
-    std::fs::write(out.join("report.md"), markdown(results)).context("cannot write report.md")?;
+    let runs = crate::record::write_runs(results, out)?;
+    std::fs::write(out.join("report.md"), markdown(results, &runs)).context("cannot write report.md")?;
     Ok(())
 }
 
@@ -221,7 +223,7 @@ fn figure(md: &mut String, stem: &str, alt: &str) {
     let _ = writeln!(md, "![{alt}]({stem}.svg)\n\n(also [{stem}.png]({stem}.png))\n");
 }
 
-fn markdown(r: &Results) -> String {
+fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
     let p = &r.provenance;
     let mut md = String::new();
     let _ = writeln!(md, "# Performance report: {} ({})\n", r.experiment, r.mode);
@@ -542,8 +544,7 @@ fn markdown(r: &Results) -> String {
         "- The full agent layer (`agent::Agent`: envelope, anti-entropy, lock) on the measured path: receivers apply \
          the source's deltas to a bare `dsr::Replica`.\n\
          - Partitions with agents as separate processes (the partition runs put their agents in one process).\n\
-         - BICA statistics of the detector roles and the scheduler timeline of a detector under an injected overload.\n\
-         - MCAP output of a run (metrics as JSON-schema channels, graph deltas) for Foxglove.\n"
+         - BICA statistics of the detector roles and the scheduler timeline of a detector under an injected overload.\n"
     );
 
     let _ = writeln!(md, "{}\n", SECTIONS[8]);
@@ -555,6 +556,27 @@ fn markdown(r: &Results) -> String {
             None => "not listed",
         };
         let _ = writeln!(md, "| {} | {} | `{}` | {matches} |", d.file, d.bytes, d.sha256);
+    }
+
+    let _ = writeln!(md, "\n{}\n", SECTIONS[9]);
+    let _ = writeln!(
+        md,
+        "One MCAP file per run, to open in Foxglove (or read with the `mcap` tools): per-write latencies \
+         (`/metrics/latency`), convergence windows (`/metrics/convergence`), published bytes per 100 ms \
+         (`/metrics/bandwidth`) and the run's summary (`/metrics/summary`), each a JSON-schema channel; times are ns \
+         on the run's clock. The graph deltas of a replayed log are recorded by `cortex replay FILE --out DIR`.\n"
+    );
+    let _ = writeln!(md, "| run | file | latency messages | convergence messages |\n|---|---|---:|---:|");
+    for run in runs {
+        let count = |topic: &str| run.counts.get(topic).copied().unwrap_or(0);
+        let path = run.path.display();
+        let _ = writeln!(
+            md,
+            "| {} | [`{path}`]({path}) | {} | {} |",
+            run.label,
+            count(crate::record::Metric::Latency.topic()),
+            count(crate::record::Metric::Convergence.topic())
+        );
     }
     md
 }

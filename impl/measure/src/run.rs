@@ -31,6 +31,7 @@ use transport::{Channel, Clock, Transport, TransportStats};
 
 use crate::clock::MonoClock;
 use crate::latency::{self, LatencyRecorder, PayloadClass, Percentiles};
+use crate::record::{TimelineWrite, WriteTimeline};
 use crate::workload::Workload;
 
 /// How the endpoints of a run are connected.
@@ -191,6 +192,9 @@ pub struct RunResult {
     /// Every per-write convergence window, for merging runs (not serialised).
     #[serde(skip)]
     pub convergence_histogram: Histogram<u64>,
+    /// Publication and application times of the first writes, for the run's MCAP recording (not serialised).
+    #[serde(skip)]
+    pub timeline: WriteTimeline,
 }
 
 /// What one receiver (thread or process) reports at the end of a run.
@@ -417,8 +421,12 @@ pub(crate) fn summarise(
     let mut latency = LatencyRecorder::new();
     let mut windows = latency::histogram();
     let mut not_everywhere = 0;
+    let mut timeline = WriteTimeline::new(config.agents - 1);
     for (seq, &sent) in sent_at.iter().enumerate() {
         let class = workload.writes[seq].class;
+        let write = TimelineWrite { class, bytes: 8 + workload.writes[seq].delta.len() as u64, publish_ns: sent };
+        let applied = |o: &ReceiverOutcome| o.applied_at.get(seq).copied().filter(|&at| at != NOT_APPLIED);
+        timeline.push(write, outcomes.iter().map(applied));
         let mut window = 0;
         let mut everywhere = true;
         for outcome in &outcomes {
@@ -490,6 +498,7 @@ pub(crate) fn summarise(
         agent_costs,
         latency_histogram: latency.histogram().clone(),
         convergence_histogram: windows,
+        timeline,
     }
 }
 

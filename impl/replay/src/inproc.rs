@@ -5,7 +5,8 @@
 //! receiver, and delivers queued copies in an order drawn from a seeded generator while more than `window` are in
 //! flight, so receivers see deltas reordered (and, for big windows, interleaved across messages) but every run with
 //! the same seed is identical. [`InProcNetwork::flush`] delivers the rest. A real transport (the agents' RTPS
-//! transport) plugs in by implementing [`Sink`].
+//! transport) plugs in by implementing [`Sink`]. A caller that measures (for instance `cortex replay --out`) hears
+//! of every delivery through [`InProcNetwork::on_delivery`]; the library itself still reads no clock.
 //!
 //! [`drive`] is the replay loop: it takes paced messages, lets the caller wait until each is due (the library never
 //! sleeps), feeds the bridge and publishes the deltas. The replica's operation time is the message's log time plus
@@ -62,6 +63,24 @@ pub struct NetworkStats {
     pub deliveries: u64,
 }
 
+/// One delta applied at one receiver, as told to the hook of [`InProcNetwork::on_delivery`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Delivery {
+    /// Index of the receiver in [`InProcNetwork::receivers`].
+    pub receiver: usize,
+    /// Index of the delta among those published (0 for the first).
+    pub index: u64,
+}
+
+/// The hook called after each delivery.
+struct DeliveryHook(Box<dyn FnMut(Delivery) + Send>);
+
+impl std::fmt::Debug for DeliveryHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("DeliveryHook")
+    }
+}
+
 /// A seeded in-memory delivery to N receiver replicas.
 #[derive(Debug)]
 pub struct InProcNetwork {
@@ -70,6 +89,7 @@ pub struct InProcNetwork {
     window: usize,
     rng: u64,
     stats: NetworkStats,
+    on_delivery: Option<DeliveryHook>,
 }
 
 impl InProcNetwork {
@@ -78,7 +98,20 @@ impl InProcNetwork {
     pub fn new(receivers: u32, first_id: u32, dictionary: &Dictionary, seed: u64, window: usize) -> Self {
         let receivers =
             (0..receivers).map(|i| Replica::with_dictionary(ReplicaId(first_id + i), dictionary.clone())).collect();
-        InProcNetwork { receivers, pending: Vec::new(), window, rng: seed, stats: NetworkStats::default() }
+        InProcNetwork {
+            receivers,
+            pending: Vec::new(),
+            window,
+            rng: seed,
+            stats: NetworkStats::default(),
+            on_delivery: None,
+        }
+    }
+
+    /// Calls `hook` after each delta is decoded and applied at a receiver (replacing an earlier hook). The hook runs
+    /// inside [`Sink::publish`] and [`Sink::flush`], so it should be quick: stamp a clock, push to a queue.
+    pub fn on_delivery(&mut self, hook: impl FnMut(Delivery) + Send + 'static) {
+        self.on_delivery = Some(DeliveryHook(Box::new(hook)));
     }
 
     /// The receiver replicas.
@@ -107,6 +140,9 @@ impl InProcNetwork {
         let delta = Delta::decode(&bytes).map_err(refused)?;
         self.receivers[receiver].apply(&delta).map_err(refused)?;
         self.stats.deliveries += 1;
+        if let Some(hook) = &mut self.on_delivery {
+            (hook.0)(Delivery { receiver, index });
+        }
         Ok(())
     }
 }

@@ -101,3 +101,22 @@ fn recovered_prefix_of_a_truncated_log_replays_and_converges() {
     assert!(equal);
     assert!(bridge.stats().decoded["sensor_msgs/msg/Image"] > 0);
 }
+
+#[test]
+fn the_delivery_hook_hears_every_delta_at_every_receiver_once() {
+    let log = open("sick_tim7xx_scan_10s.mcap");
+    let dictionary = replay::bridge::dictionary().unwrap();
+    let mut replica = Replica::with_dictionary(ReplicaId(1), dictionary.clone());
+    let mut network = InProcNetwork::new(3, 2, &dictionary, 5, 16);
+    let (sender, heard) = std::sync::mpsc::channel();
+    network.on_delivery(move |delivery| sender.send(delivery).unwrap());
+    let mut bridge = Bridge::new(BridgeOptions::default());
+    let pacer = Pacer::new(&log.messages, Rate::Max, 1, || 0);
+    let stats = inproc::drive(pacer, &mut bridge, &mut replica, &mut network, |_| {}).unwrap();
+    let mut deliveries: Vec<(u64, usize)> = heard.try_iter().map(|d| (d.index, d.receiver)).collect();
+    let in_order = deliveries.clone();
+    deliveries.sort_unstable();
+    let expected: Vec<(u64, usize)> = (0..stats.deltas).flat_map(|i| (0..3).map(move |r| (i, r))).collect();
+    assert_eq!(deliveries, expected);
+    assert_ne!(in_order, expected, "a window of 16 reorders deliveries");
+}
