@@ -89,6 +89,44 @@ fn a_log_replays_over_rtps_into_agent_processes() {
 }
 
 #[test]
+fn a_replay_configuration_file_with_faults_over_rtps_converges() {
+    let dir = std::env::temp_dir().join(format!("cortex-replay-config-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("experiments")).unwrap();
+    let config = dir.join("experiments/replay.toml");
+    let log = repo("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap");
+    std::fs::write(
+        &config,
+        format!(
+            "log = {log:?}\nagents = 3\ntransport = \"rtps\"\nrate = \"4\"\ndomain = 78\n\
+             faults = \"loss=0.1,duplicate=0.05\"\n"
+        ),
+    )
+    .unwrap();
+    let out = cortex(&["replay", "--config", config.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    assert_eq!((summary["transport"].as_str(), summary["agents"].as_u64()), (Some("rtps"), Some(3)));
+    assert!(summary["faults"].as_str().unwrap().starts_with("loss=0.1,duplicate=0.05,"), "{summary}");
+    assert_eq!(summary["digests_equal"], true, "lost samples repaired by anti-entropy");
+    // The command line wins over the file.
+    let out = cortex(&["replay", "--config", config.to_str().unwrap(), "--transport", "inproc", "--faults", "none"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("over inproc with 3 agents"));
+
+    std::fs::write(&config, "agents = 3\nspeed = 2\n").unwrap();
+    let out = cortex(&["replay", "--config", config.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("not a valid replay configuration") && stderr.contains("speed"), "{stderr}");
+    std::fs::write(&config, format!("log = {log:?}\nroles = [\"painter\"]\ntransport = \"rtps\"\n")).unwrap();
+    let out = cortex(&["replay", "--config", config.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("field `roles`"), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = cortex(&["replay", &log, "--faults", "loss=0.1"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--faults needs --transport rtps"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn datasets_verify_passes_and_catches_a_changed_file() {
     let out = cortex(&["datasets", "verify", "--dir", &repo("datasets/logs"), "--json"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

@@ -29,6 +29,7 @@ use perception::labelling::{ColourClass, LabelConfig, LabelTables};
 use perception::obstacles::{LaserObstacleDetector, ObstacleConfig};
 use perception::sensors::{CameraReader, Image, LaserReader, write_image};
 use transport::SystemClock;
+use transport::fault::{FaultConfig, FaultPlan};
 use transport::rtps::{RtpsConfig, RtpsTransport};
 
 /// Arguments of `cortex agent`.
@@ -88,6 +89,10 @@ pub struct AgentArgs {
     /// --transport rtps` drives its agent processes this way.
     #[arg(long)]
     pub control_stdin: bool,
+    /// Inject faults into what this agent receives (seeded with its id), e.g. `loss=0.1,delay-ms=0-2`: keys
+    /// `loss`, `duplicate`, `reorder`, `reorder-ms`, `delay-ms`, `max-held`.
+    #[arg(long)]
+    pub faults: Option<FaultConfig>,
 }
 
 /// The BICA roles an agent process can run.
@@ -105,7 +110,12 @@ pub enum Role {
     Bridge,
 }
 
-/// Starts an agent on RTPS with the real clock: the way `cortex agent` and `cortex inspect` join a graph.
+/// The transport of an agent process: RTPS, possibly behind the seeded fault injector.
+pub type AgentTransport = Arc<dyn transport::Transport>;
+
+/// Starts an agent on RTPS with the real clock: the way `cortex agent` and `cortex inspect` join a graph. With
+/// `faults`, what the agent receives goes through the seeded fault injector (seeded with the agent id), so loss,
+/// duplication, reordering and delay hit a real agent with its anti-entropy.
 ///
 /// # Errors
 /// An unreadable or invalid seed graph, or a DDS domain that cannot be joined.
@@ -115,7 +125,8 @@ pub fn start_rtps_agent(
     seed_json: Option<&std::path::Path>,
     domain: u16,
     topic_prefix: &str,
-) -> Result<Arc<Agent<RtpsTransport>>> {
+    faults: Option<FaultConfig>,
+) -> Result<Arc<Agent<AgentTransport>>> {
     if id >= AgentId::LIMIT {
         bail!("--id {id} is out of range (0..{})", AgentId::LIMIT);
     }
@@ -126,14 +137,27 @@ pub fn start_rtps_agent(
         config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
     }
     let rtps = RtpsConfig { domain_id: domain, topic_prefix: topic_prefix.to_owned(), ..RtpsConfig::default() };
-    let transport = RtpsTransport::new(rtps).context("joining the DDS domain")?;
+    let rtps = RtpsTransport::new(rtps).context("joining the DDS domain")?;
+    let transport: AgentTransport = match faults {
+        Some(faults) => {
+            let plan = FaultPlan::new(u64::from(id), faults);
+            Arc::new(plan.wrap(rtps, Arc::new(SystemClock) as Arc<dyn transport::Clock>))
+        }
+        None => Arc::new(rtps),
+    };
     Ok(Arc::new(Agent::start(config, transport, Arc::new(SystemClock))?))
 }
 
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
-    let agent =
-        start_rtps_agent(args.id, args.join_wait_ms, args.seed_json.as_deref(), args.domain, &args.topic_prefix)?;
+    let agent = start_rtps_agent(
+        args.id,
+        args.join_wait_ms,
+        args.seed_json.as_deref(),
+        args.domain,
+        &args.topic_prefix,
+        args.faults,
+    )?;
     let stop = Arc::new(AtomicBool::new(false));
     let mut player = None;
     let driver = match args.role {
@@ -279,7 +303,7 @@ pub struct Played {
 /// The `bridge` role: paces `log` on the monotonic clock and writes each message into the agent's graph through
 /// `replay::Bridge` (the agent publishes the deltas), until the log ends or `stop` is set.
 pub fn play_log(
-    agent: &Agent<RtpsTransport>,
+    agent: &Agent<AgentTransport>,
     log: &replay::Log,
     options: replay::BridgeOptions,
     rate: replay::Rate,
@@ -320,7 +344,7 @@ fn ms(period_ms: u64) -> u64 {
 /// Starts `role`'s runtime on its own thread, over `agent`'s graph; returns it with its named methods.
 fn start_role(
     role: Role,
-    agent: &Arc<Agent<RtpsTransport>>,
+    agent: &Arc<Agent<AgentTransport>>,
     sensor: &str,
     period_ms: u64,
 ) -> Result<(Driver, Service)> {

@@ -71,6 +71,7 @@ pub fn run(args: InspectArgs) -> Result<()> {
         args.seed_json.as_deref(),
         args.domain,
         &args.topic_prefix,
+        None,
     )?;
     let feed: Arc<dyn GraphFeed> = agent.clone();
     let mut demo = None;

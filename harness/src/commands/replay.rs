@@ -19,10 +19,10 @@
 use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context as _, bail};
+use anyhow::{Context as _, anyhow, bail};
 use clap::{Args, ValueEnum};
 use dsr::{Replica, ReplicaId};
 use measure::record::{self, RecordingSink, RunRecorder, RunSummary};
@@ -30,7 +30,8 @@ use measure::{MonoClock, PayloadClass, Percentiles, Provenance};
 use replay::inproc::{self, InProcNetwork};
 use replay::log::{Log, ReadOptions};
 use replay::{Bridge, BridgeOptions, BridgeStats, Pacer, Rate};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use transport::fault::FaultConfig;
 
 /// How the agents are connected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -41,23 +42,29 @@ pub enum Transport {
     Rtps,
 }
 
-/// Arguments of `cortex replay`.
+/// Arguments of `cortex replay`. Options not given come from `--config FILE.toml` if it sets them, else from the
+/// defaults shown.
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
-    /// A ROS 2 MCAP file (`cdr` messages, `ros2msg` schemas).
-    file: PathBuf,
-    /// Number of agents, the bridge included (1 to 64).
-    #[arg(long, default_value_t = 3)]
-    agents: u32,
-    /// How the agents are connected.
-    #[arg(long, value_enum, default_value_t = Transport::Inproc)]
-    transport: Transport,
-    /// Speed: a factor on the recorded timing (2 plays twice as fast) or `max`.
-    #[arg(long, default_value = "1")]
-    rate: Rate,
-    /// Play the log this many times.
-    #[arg(long = "loop", default_value_t = 1)]
-    loops: u32,
+    /// A ROS 2 MCAP file (`cdr` messages, `ros2msg` schemas); may come from `--config` instead.
+    file: Option<PathBuf>,
+    /// A replay configuration (TOML): any of `log`, `agents`, `transport`, `rate`, `loops`, `topics`, `roles`,
+    /// `faults`, `seed`, `window`, `domain`, `settle_ms`; relative paths against the parent of the file's
+    /// directory (the repository root for files in `experiments/`). Command-line options win.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Number of agents, the bridge included (1 to 64) [default: 3].
+    #[arg(long)]
+    agents: Option<u32>,
+    /// How the agents are connected [default: inproc].
+    #[arg(long, value_enum)]
+    transport: Option<Transport>,
+    /// Speed: a factor on the recorded timing (2 plays twice as fast) or `max` [default: 1].
+    #[arg(long)]
+    rate: Option<Rate>,
+    /// Play the log this many times [default: 1].
+    #[arg(long = "loop")]
+    loops: Option<u32>,
     /// Only these topics (comma-separated).
     #[arg(long, value_delimiter = ',')]
     topics: Option<Vec<String>>,
@@ -67,22 +74,27 @@ pub struct ReplayArgs {
     /// Carry messages of unknown types as opaque byte attributes instead of skipping them.
     #[arg(long)]
     opaque: bool,
-    /// Seed of the in-process delivery order.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// Deltas in flight in the in-process delivery before one is delivered (reordering depth).
-    #[arg(long, default_value_t = 64)]
-    window: usize,
-    /// DDS domain id (`--transport rtps`).
-    #[arg(long, default_value_t = 0)]
-    domain: u16,
+    /// Seed of the in-process delivery order [default: 1].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Deltas in flight in the in-process delivery before one is delivered (reordering depth) [default: 64].
+    #[arg(long)]
+    window: Option<usize>,
+    /// DDS domain id (`--transport rtps`) [default: 0].
+    #[arg(long)]
+    domain: Option<u16>,
     /// BICA roles of agents 2, 3, ... (`--transport rtps`), comma-separated, each `ROLE[:NODE]`: e.g.
     /// `camera-detector:cam0,laser-detector:scan`. The other agents are plain.
     #[arg(long, value_delimiter = ',')]
-    roles: Vec<super::replay_rtps::RoleSpec>,
-    /// How long to wait for the agent processes to be ready, and after the replay for equal digests (ms).
-    #[arg(long, default_value_t = 30_000)]
-    settle_ms: u64,
+    roles: Option<Vec<super::replay_rtps::RoleSpec>>,
+    /// Faults injected into what every agent process receives (`--transport rtps`; the agents' anti-entropy
+    /// repairs them), e.g. `loss=0.1,duplicate=0.05,reorder=0.2,reorder-ms=10,delay-ms=0-2`.
+    #[arg(long)]
+    faults: Option<FaultConfig>,
+    /// How long to wait for the agent processes to be ready, and after the replay for equal digests (ms)
+    /// [default: 30000].
+    #[arg(long)]
+    settle_ms: Option<u64>,
     /// Print stable, machine-readable JSON instead of text.
     #[arg(long)]
     json: bool,
@@ -90,6 +102,107 @@ pub struct ReplayArgs {
     /// convergence windows, bandwidth and the summary, for Foxglove.
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
+}
+
+/// A replay configuration file (`--config`): every field optional, unknown fields refused.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ReplayFile {
+    log: Option<PathBuf>,
+    agents: Option<u32>,
+    transport: Option<String>,
+    rate: Option<String>,
+    loops: Option<u32>,
+    topics: Option<Vec<String>>,
+    roles: Option<Vec<String>>,
+    faults: Option<String>,
+    seed: Option<u64>,
+    window: Option<usize>,
+    domain: Option<u16>,
+    settle_ms: Option<u64>,
+}
+
+/// The replay as it runs: the command line over the configuration file over the defaults.
+#[derive(Debug)]
+struct Resolved {
+    file: PathBuf,
+    agents: u32,
+    transport: Transport,
+    rate: Rate,
+    loops: u32,
+    topics: Option<Vec<String>>,
+    recover: bool,
+    opaque: bool,
+    seed: u64,
+    window: usize,
+    domain: u16,
+    roles: Vec<super::replay_rtps::RoleSpec>,
+    faults: Option<FaultConfig>,
+    settle_ms: u64,
+    json: bool,
+    out: Option<PathBuf>,
+}
+
+/// Reads `--config` (if any) and merges it under the command line.
+fn resolve(args: ReplayArgs) -> anyhow::Result<Resolved> {
+    let (file, root) = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+            let file: ReplayFile = toml::from_str(&text)
+                .with_context(|| format!("{} is not a valid replay configuration", path.display()))?;
+            (file, measure::experiment::ExperimentFile::root_of(path))
+        }
+        None => (ReplayFile::default(), PathBuf::from(".")),
+    };
+    let at = |field: &str| format!("{} field `{field}`", args.config.as_deref().unwrap_or(Path::new("")).display());
+    let transport = match (args.transport, file.transport.as_deref()) {
+        (Some(t), _) => t,
+        (None, Some(name)) => Transport::from_str(name, true)
+            .map_err(|_| anyhow!("{}: {name:?} is not inproc or rtps", at("transport")))?,
+        (None, None) => Transport::Inproc,
+    };
+    let rate = match (args.rate, file.rate) {
+        (Some(rate), _) => rate,
+        (None, Some(text)) => text.parse().map_err(|e| anyhow!("{}: {e}", at("rate")))?,
+        (None, None) => Rate::Factor(1.0),
+    };
+    let roles = match (args.roles, file.roles) {
+        (Some(roles), _) => roles,
+        (None, Some(names)) => names
+            .iter()
+            .map(|name| name.parse().map_err(|e: String| anyhow!("{}: {e}", at("roles"))))
+            .collect::<anyhow::Result<_>>()?,
+        (None, None) => Vec::new(),
+    };
+    let faults = match (args.faults, file.faults) {
+        (Some(faults), _) => Some(faults),
+        (None, Some(text)) => Some(text.parse().map_err(|e| anyhow!("{}: {e}", at("faults")))?),
+        (None, None) => None,
+    };
+    let log = match (args.file, file.log) {
+        (Some(path), _) => path,
+        (None, Some(path)) => root.join(path),
+        (None, None) => bail!("no log to replay: give FILE.mcap, or `log` in --config"),
+    };
+    Ok(Resolved {
+        file: log,
+        agents: args.agents.or(file.agents).unwrap_or(3),
+        transport,
+        rate,
+        loops: args.loops.or(file.loops).unwrap_or(1),
+        topics: args.topics.or(file.topics),
+        recover: args.recover,
+        opaque: args.opaque,
+        seed: args.seed.or(file.seed).unwrap_or(1),
+        window: args.window.or(file.window).unwrap_or(64),
+        domain: args.domain.or(file.domain).unwrap_or(0),
+        roles,
+        // `none` on the command line turns off the file's faults.
+        faults: faults.filter(|f| *f != FaultConfig::default()),
+        settle_ms: args.settle_ms.or(file.settle_ms).unwrap_or(30_000),
+        json: args.json,
+        out: args.out,
+    })
 }
 
 /// What a replay did.
@@ -114,6 +227,9 @@ struct Summary {
     deliveries: u64,
     digests: Vec<String>,
     digests_equal: bool,
+    /// Faults injected into what the agent processes receive (`--faults`), as a specification.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    faults: Option<String>,
     /// Over RTPS: each agent's graph at the end, the bridge first.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     agent_reports: Vec<super::replay_rtps::AgentReport>,
@@ -139,11 +255,18 @@ struct Recording {
 /// A file that cannot be read (or is damaged, without `--recover`), bad arguments, the RTPS transport, a delta a
 /// receiver refuses, or final digests that differ.
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    let args = resolve(args)?;
     if !(1..=64).contains(&args.agents) {
         bail!("--agents must be between 1 and 64, not {}", args.agents);
     }
     if args.transport == Transport::Inproc && !args.roles.is_empty() {
         bail!("--roles needs --transport rtps (the roles run in agent processes)");
+    }
+    if args.transport == Transport::Inproc && args.faults.is_some() {
+        bail!(
+            "--faults needs --transport rtps: the in-process replay has no anti-entropy to repair them (its delivery \
+             already reorders with --window); the agent processes of an RTPS replay do"
+        );
     }
     let options = ReadOptions { recover: args.recover, ..ReadOptions::default() };
     let log = Log::open(&args.file, options).context("cannot replay")?;
@@ -241,6 +364,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         deliveries: stats.deliveries,
         digests: digest_strings,
         digests_equal,
+        faults: None,
         agent_reports: Vec::new(),
         converged_ms: None,
         recording,
@@ -256,7 +380,7 @@ fn rate_text(rate: Rate) -> String {
 }
 
 /// Prints the summary; an error if the digests differ.
-fn finish(args: &ReplayArgs, summary: &Summary) -> anyhow::Result<()> {
+fn finish(args: &Resolved, summary: &Summary) -> anyhow::Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(summary)?);
     } else {
@@ -268,11 +392,12 @@ fn finish(args: &ReplayArgs, summary: &Summary) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_rtps(args: &ReplayArgs, log: &Log) -> anyhow::Result<()> {
+fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
     let config = super::replay_rtps::RtpsReplay {
         agents: args.agents,
         domain: args.domain,
         roles: args.roles.clone(),
+        faults: args.faults,
         settle: Duration::from_millis(args.settle_ms),
     };
     let options = BridgeOptions { topics: args.topics.clone(), opaque: args.opaque };
@@ -298,6 +423,7 @@ fn run_rtps(args: &ReplayArgs, log: &Log) -> anyhow::Result<()> {
         deliveries: outcome.agents.iter().skip(1).map(|a| a.samples_received).sum(),
         digests: outcome.agents.iter().map(|a| a.digest.clone()).collect(),
         digests_equal: outcome.digests_equal,
+        faults: args.faults.map(|f| f.to_spec()),
         agent_reports: outcome.agents.clone(),
         converged_ms: outcome.converged_ms,
         recording: None,
@@ -312,6 +438,9 @@ fn text(s: &Summary) -> String {
         "replay {} ({} bytes) over {} with {} agents, rate {}, {} loop(s)",
         s.file, s.file_bytes, s.transport, s.agents, s.rate, s.loops
     );
+    if let Some(faults) = &s.faults {
+        let _ = writeln!(out, "  faults        {faults} (on what each agent process receives)");
+    }
     if let Some(damage) = &s.damage {
         let _ = writeln!(out, "  damage        {damage} ({} bytes unread)", s.unread_bytes);
     }

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, Result, bail};
 use serde::Serialize;
 
-use super::agent::{Played, Role, play_log, start_rtps_agent};
+use super::agent::{AgentTransport, Played, Role, play_log, start_rtps_agent};
 
 /// A BICA role for one agent process, with the node it works on: `camera-detector`, `laser-detector:scan`, ...
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -60,6 +60,8 @@ pub struct RtpsReplay {
     pub domain: u16,
     /// Roles of agents 2, 3, ... (the rest are plain agents).
     pub roles: Vec<RoleSpec>,
+    /// Faults injected into what every agent process receives (not the bridge).
+    pub faults: Option<transport::fault::FaultConfig>,
     /// How long to wait for the agents to be ready, and after the replay for equal digests.
     pub settle: Duration,
 }
@@ -147,6 +149,7 @@ fn spawn(
     domain: u16,
     prefix: &str,
     role: Option<&RoleSpec>,
+    faults: Option<&str>,
     tx: mpsc::Sender<(u32, serde_json::Value)>,
 ) -> Result<AgentProcess> {
     let program = std::env::current_exe().context("cannot find the cortex binary")?;
@@ -159,6 +162,9 @@ fn spawn(
         "60000",
         "--control-stdin",
     ]);
+    if let Some(faults) = faults {
+        command.args(["--faults", faults]);
+    }
     if let Some(spec) = role {
         command.args(["--role", &role_name(spec.role)]);
         if let Some(sensor) = &spec.sensor {
@@ -205,10 +211,7 @@ fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentReport {
 }
 
 /// A role's BICA statistics, by a remote call from the bridge agent.
-fn role_statistics(
-    bridge: &agent::Agent<transport::rtps::RtpsTransport>,
-    id: u32,
-) -> Result<Vec<ComponentSummary>, String> {
+fn role_statistics(bridge: &agent::Agent<AgentTransport>, id: u32) -> Result<Vec<ComponentSummary>, String> {
     let reply: bica::service::ComponentsReply = bridge
         .call(agent::AgentId(id), bica::service::COMPONENTS, &(), Duration::from_secs(2))
         .map_err(|e| e.to_string())?;
@@ -246,15 +249,16 @@ pub fn replay(
         bail!("{} roles given for {} agent processes", config.roles.len(), config.agents.saturating_sub(1));
     }
     let prefix = format!("replay{}", std::process::id());
-    let bridge = start_rtps_agent(1, 300, None, config.domain, &prefix)?;
+    let bridge = start_rtps_agent(1, 300, None, config.domain, &prefix, None)?;
     if !bridge.wait_ready(Duration::from_secs(10)) {
         bail!("the bridge agent did not start its graph");
     }
     let (tx, rx) = mpsc::channel();
+    let faults = config.faults.map(|f| f.to_spec());
     let mut procs = Vec::new();
     for id in 2..=config.agents {
         let role = config.roles.get((id - 2) as usize);
-        procs.push(spawn(id, config.domain, &prefix, role, tx.clone())?);
+        procs.push(spawn(id, config.domain, &prefix, role, faults.as_deref(), tx.clone())?);
     }
     drop(tx);
     let mut last: BTreeMap<u32, serde_json::Value> = BTreeMap::new();

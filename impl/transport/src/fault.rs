@@ -256,6 +256,25 @@ impl<T: Transport> Transport for FaultInjector<T> {
     }
 }
 
+impl FaultConfig {
+    /// The command-line specification of this configuration (what [`FaultConfig::from_str`](std::str::FromStr)
+    /// parses back to the same value): every key, e.g. `loss=0.1,duplicate=0,reorder=0,reorder-ms=0,delay-ms=0-2,
+    /// max-held=100000`.
+    pub fn to_spec(&self) -> String {
+        let ms = |ns: u64| ns as f64 / 1e6;
+        format!(
+            "loss={},duplicate={},reorder={},reorder-ms={},delay-ms={}-{},max-held={}",
+            self.loss,
+            self.duplicate,
+            self.reorder,
+            ms(self.reorder_ns),
+            ms(self.delay_ns.0),
+            ms(self.delay_ns.1),
+            self.max_held
+        )
+    }
+}
+
 /// A fault specification that does not parse; the message names the part and what is wrong.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("fault specification {spec:?}: {detail}")]
@@ -303,7 +322,7 @@ impl std::str::FromStr for FaultConfig {
                 }
                 Ok(p)
             };
-            let ns = |ms: f64| (ms * 1e6) as u64;
+            let ns = |ms: f64| (ms * 1e6).round() as u64;
             match key.trim() {
                 "loss" => config.loss = probability(value)?,
                 "duplicate" => config.duplicate = probability(value)?,
@@ -455,6 +474,9 @@ mod tests {
                 max_held: 9
             }
         );
+        assert_eq!(config.to_spec().parse::<FaultConfig>().unwrap(), config);
+        let odd = FaultConfig { reorder_ns: 1_234_567, delay_ns: (3, 2_000_001), ..config };
+        assert_eq!(odd.to_spec().parse::<FaultConfig>().unwrap(), odd);
         assert_eq!("none".parse::<FaultConfig>().unwrap(), FaultConfig::default());
         assert_eq!("".parse::<FaultConfig>().unwrap(), FaultConfig::default());
         for (bad, says) in [
