@@ -60,8 +60,9 @@ fn damaged_files_and_bad_arguments_are_errors() {
 #[test]
 fn a_log_replays_over_rtps_into_agent_processes() {
     let log = repo("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap");
+    let dir = std::env::temp_dir().join(format!("cortex-replay-rtps-{}", std::process::id()));
     let args = ["replay", &log, "--transport", "rtps", "--domain", "78", "--rate", "4", "--json"];
-    let out = cortex(&[&args[..], &["--agents", "2"]].concat());
+    let out = cortex(&[&args[..], &["--agents", "2", "--out", dir.to_str().unwrap()]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
     assert_eq!(summary["transport"], "rtps");
@@ -74,6 +75,16 @@ fn a_log_replays_over_rtps_into_agent_processes() {
     assert!(agents[0]["nodes"].as_u64().unwrap() >= 5 && agents[1]["nodes"] == agents[0]["nodes"]);
     assert!(agents[1]["samples_received"].as_u64().unwrap() >= summary["deltas"].as_u64().unwrap());
     assert!(summary["converged_ms"].is_f64());
+    // `--out`: the deltas the bridge published, which rebuild its graph.
+    let deltas = summary["deltas"].as_u64().unwrap();
+    assert_eq!(summary["recording"]["messages"]["/dsr/deltas"], deltas);
+    let recorded = replay::log::Log::open(dir.join("run.mcap"), replay::log::ReadOptions::default()).unwrap();
+    let mut replica = dsr::Replica::with_dictionary(dsr::ReplicaId(9), replay::bridge::dictionary().unwrap());
+    for message in recorded.messages.iter().filter(|m| m.channel.topic == "/dsr/deltas") {
+        replica.apply(&dsr::Delta::decode(&message.data).unwrap()).unwrap();
+    }
+    assert_eq!(replica.digest().to_string(), summary["digests"][0].as_str().unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
 
     // A BICA role in one of the processes: quiesced after the replay, then every graph is equal.
     let out = cortex(&[&args[..], &["--agents", "3", "--roles", "camera-detector"]].concat());

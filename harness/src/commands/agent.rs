@@ -170,7 +170,8 @@ pub fn run(args: AgentArgs) -> Result<()> {
                 .with_context(|| format!("cannot replay {}", path.display()))?;
             let (agent, stop, rate, loops) = (Arc::clone(&agent), Arc::clone(&stop), args.rate, args.loops);
             player = Some(std::thread::spawn(move || {
-                play_log(&agent, &log, replay::BridgeOptions::default(), rate, loops, &stop).map(|p| p.bridge)
+                play_log(&agent, &log, replay::BridgeOptions::default(), rate, loops, &stop, &mut |_| Ok(()))
+                    .map(|p| p.bridge)
             }));
             None
         }
@@ -301,7 +302,8 @@ pub struct Played {
 }
 
 /// The `bridge` role: paces `log` on the monotonic clock and writes each message into the agent's graph through
-/// `replay::Bridge` (the agent publishes the deltas), until the log ends or `stop` is set.
+/// `replay::Bridge` (the agent publishes the deltas), until the log ends or `stop` is set. `on_deltas` sees the
+/// deltas of each message once the agent has published them.
 pub fn play_log(
     agent: &Agent<AgentTransport>,
     log: &replay::Log,
@@ -309,6 +311,7 @@ pub fn play_log(
     rate: replay::Rate,
     loops: u32,
     stop: &AtomicBool,
+    on_deltas: &mut dyn FnMut(&[Arc<dsr::Delta>]) -> Result<()>,
 ) -> Result<Played> {
     let mut bridge = replay::Bridge::new(options);
     let mut played = Played::default();
@@ -328,10 +331,12 @@ pub fn play_log(
         }
         played.messages += 1;
         played.bytes += item.message.data.len() as u64;
-        played.deltas += agent.update(|replica, now_ns| {
+        let deltas = agent.update(|replica, now_ns| {
             let deltas = bridge.ingest(replica, now_ns, item.message, item.shift_ns);
-            (deltas.len() as u64, deltas)
+            (deltas.clone(), deltas)
         })?;
+        played.deltas += deltas.len() as u64;
+        on_deltas(&deltas)?;
     }
     played.bridge = bridge.stats().clone();
     Ok(played)

@@ -245,8 +245,12 @@ struct Summary {
 struct Recording {
     path: String,
     messages: BTreeMap<&'static str, u64>,
-    latency: Percentiles,
-    convergence: Percentiles,
+    /// Latencies at the in-process receivers (not recorded over RTPS).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    latency: Option<Percentiles>,
+    /// Convergence windows (not recorded over RTPS).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    convergence: Option<Percentiles>,
 }
 
 /// Runs `cortex replay`.
@@ -279,9 +283,6 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     if args.transport == Transport::Rtps {
-        if args.out.is_some() {
-            bail!("--out records in-process replays (--transport inproc); over RTPS, `cortex report` measures runs");
-        }
         return run_rtps(&args, &log);
     }
     let dictionary = replay::bridge::dictionary().context("bridge dictionary")?;
@@ -341,7 +342,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             };
             recorder.summary(clock.now_ns(), &summary)?;
             let messages = record::finish_file(recorder).with_context(|| format!("cannot write {}", path.display()))?;
-            Some(Recording { path: path.display().to_string(), messages, latency, convergence })
+            Some(Recording {
+                path: path.display().to_string(),
+                messages,
+                latency: Some(latency),
+                convergence: Some(convergence),
+            })
         }
     };
     let summary = Summary {
@@ -399,6 +405,13 @@ fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
         roles: args.roles.clone(),
         faults: args.faults,
         settle: Duration::from_millis(args.settle_ms),
+        record: match &args.out {
+            Some(dir) => {
+                std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+                Some(dir.join("run.mcap"))
+            }
+            None => None,
+        },
     };
     let options = BridgeOptions { topics: args.topics.clone(), opaque: args.opaque };
     let outcome = super::replay_rtps::replay(log, options, args.rate, args.loops, &config)?;
@@ -426,7 +439,12 @@ fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
         faults: args.faults.map(|f| f.to_spec()),
         agent_reports: outcome.agents.clone(),
         converged_ms: outcome.converged_ms,
-        recording: None,
+        recording: outcome.recorded.map(|(path, messages)| Recording {
+            path: path.display().to_string(),
+            messages,
+            latency: None,
+            convergence: None,
+        }),
     };
     finish(args, &summary)
 }
@@ -503,16 +521,29 @@ fn text(s: &Summary) -> String {
     let _ = writeln!(out, "  digests       {verdict}: {}", s.digests.join(" "));
     if let Some(r) = &s.recording {
         let count = |topic: &str| r.messages.get(topic).copied().unwrap_or(0);
-        let _ = writeln!(
-            out,
-            "  recorded      {}: {} deltas, {} latencies (p50 {:.3} ms, p99 {:.3} ms), {} convergence windows",
-            r.path,
-            count(record::DELTA_TOPIC),
-            count(record::Metric::Latency.topic()),
-            r.latency.p50_ns as f64 / 1e6,
-            r.latency.p99_ns as f64 / 1e6,
-            count(record::Metric::Convergence.topic())
-        );
+        match r.latency {
+            Some(latency) => {
+                let _ = writeln!(
+                    out,
+                    "  recorded      {}: {} deltas, {} latencies (p50 {:.3} ms, p99 {:.3} ms), {} convergence windows",
+                    r.path,
+                    count(record::DELTA_TOPIC),
+                    count(record::Metric::Latency.topic()),
+                    latency.p50_ns as f64 / 1e6,
+                    latency.p99_ns as f64 / 1e6,
+                    count(record::Metric::Convergence.topic())
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    out,
+                    "  recorded      {}: {} deltas as the bridge published them, {} bandwidth windows",
+                    r.path,
+                    count(record::DELTA_TOPIC),
+                    count(record::Metric::Bandwidth.topic())
+                );
+            }
+        }
     }
     out
 }

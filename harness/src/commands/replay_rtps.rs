@@ -64,6 +64,8 @@ pub struct RtpsReplay {
     pub faults: Option<transport::fault::FaultConfig>,
     /// How long to wait for the agents to be ready, and after the replay for equal digests.
     pub settle: Duration,
+    /// Record the deltas the bridge publishes, and the bytes per 100 ms, as this MCAP file.
+    pub record: Option<std::path::PathBuf>,
 }
 
 /// BICA statistics of one component of a role, fetched over a remote call at the end of the replay.
@@ -125,6 +127,8 @@ pub struct RtpsOutcome {
     pub digests_equal: bool,
     /// Milliseconds from the end of the replay until every agent reported the bridge's digest.
     pub converged_ms: Option<f64>,
+    /// The MCAP file written and its messages per topic, if asked.
+    pub recorded: Option<(std::path::PathBuf, measure::record::RecordCounts)>,
 }
 
 /// An agent process whose status lines arrive on a channel; killed if dropped while still running.
@@ -272,9 +276,42 @@ pub fn replay(
     }
 
     let stop = AtomicBool::new(false);
+    let mut recording = match &config.record {
+        Some(path) => {
+            let mut metadata = measure::record::provenance_metadata(&measure::Provenance::current());
+            metadata.insert("run".to_owned(), format!("cortex replay {} --transport rtps", log.file));
+            metadata.insert("agents".to_owned(), config.agents.to_string());
+            metadata.insert(
+                "recorded".to_owned(),
+                "the deltas the bridge agent published (log time: when its update returned, after publication) and \
+                 published bytes per 100 ms; latencies of RTPS runs are measured by cortex report"
+                    .to_owned(),
+            );
+            let mut recorder = measure::record::RunRecorder::create(path, metadata)?;
+            recorder.add_delta_channel("replay::bridge::dictionary()")?;
+            Some((recorder, measure::MonoClock::start(), 0u64))
+        }
+        None => None,
+    };
+    let mut record = |deltas: &[std::sync::Arc<dsr::Delta>]| -> Result<()> {
+        if let Some((recorder, clock, index)) = recording.as_mut() {
+            let now = clock.now_ns();
+            for delta in deltas {
+                recorder.delta(*index, now, &delta.encode())?;
+                *index += 1;
+            }
+        }
+        Ok(())
+    };
     let before = bridge.status().transport;
     let started = Instant::now();
-    let played = play_log(&bridge, log, options, rate, loops, &stop)?;
+    let played = play_log(&bridge, log, options, rate, loops, &stop, &mut record)?;
+    let mut recorded = None;
+    if let (Some((recorder, _, _)), Some(path)) = (recording, &config.record) {
+        let counts =
+            measure::record::finish_file(recorder).with_context(|| format!("cannot write {}", path.display()))?;
+        recorded = Some((path.clone(), counts));
+    }
     let seconds = started.elapsed().as_secs_f64();
     let ended = Instant::now();
     let bridge_bytes = bridge.status().transport.payload_bytes_sent - before.payload_bytes_sent;
@@ -336,7 +373,7 @@ pub fn replay(
     drop(procs);
     bridge.shutdown();
     let digests_equal = agents.iter().all(|a| a.digest == agents[0].digest);
-    Ok(RtpsOutcome { played, seconds, bridge_bytes, agents, digests_equal, converged_ms })
+    Ok(RtpsOutcome { played, seconds, bridge_bytes, agents, digests_equal, converged_ms, recorded })
 }
 
 #[cfg(test)]
