@@ -14,11 +14,13 @@ use crate::figures::{self, Chart, Series};
 use crate::latency::{self, Percentiles};
 use crate::run::RunResult;
 
-/// Stems of the figures a report contains (each written as `.svg` and `.png`).
+/// Stems of the figures a report contains (each written as `.svg` and `.png`); a set with a timeline adds
+/// [`crate::timeline::FIGURE`].
 pub const FIGURES: [&str; 4] =
     ["latency_cdf_by_agents", "latency_vs_payload", "bandwidth_vs_agents", "convergence_windows"];
 
-/// Headings of the sections of `report.md`, in order.
+/// Headings of the sections of `report.md`, in order; [`crate::timeline::SECTION`] comes just before "Not measured
+/// yet".
 pub const SECTIONS: [&str; 9] = [
     "## How this report was obtained",
     "## Beside the paper's claims and the C++ implementation",
@@ -192,6 +194,11 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
         ..Chart::default()
     };
     figures::render(&chart, out, FIGURES[3])?;
+
+    if let Some(timeline) = &results.timeline {
+        let how = "none: one BICA runtime on one thread, real monotonic clock, overload injected by another component";
+        crate::timeline::render_figure(timeline, footer(how), out)?;
+    }
 
     std::fs::write(out.join("report.md"), markdown(results)).context("cannot write report.md")?;
     Ok(())
@@ -490,14 +497,17 @@ fn markdown(r: &Results) -> String {
     }
     let _ = writeln!(md);
 
+    crate::timeline::section(&mut md, r.timeline.as_ref());
+
     let _ = writeln!(md, "{}\n", SECTIONS[7]);
     let _ = writeln!(
         md,
         "- Agents as separate processes (`cortex agent`): the RTPS runs above put every participant in one process.\n\
          - RTPS with the fault injector and RTPS partitions (faults and partitions run on the in-process bus).\n\
          - Per-agent memory (the in-process agents share one process).\n\
-         - BICA statistics of the detector roles and the scheduler timeline of a detector under an injected overload.\n\
-         - MCAP output of a run (metrics as JSON-schema channels, graph deltas) for Foxglove.\n"
+         - BICA statistics of the detector roles{}.\n\
+         - MCAP output of a run (metrics as JSON-schema channels, graph deltas) for Foxglove.\n",
+        if r.timeline.is_some() { "" } else { " and the scheduler timeline of a detector under an injected overload" }
     );
 
     let _ = writeln!(md, "{}\n", SECTIONS[8]);
