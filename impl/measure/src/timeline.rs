@@ -602,11 +602,19 @@ pub fn render_figure(result: &TimelineResult, footer: Vec<String>, dir: &Path) -
     let mut misses = vec![(0.0, 0.0)];
     let mut skipped = vec![(0.0, 0.0)];
     let (mut m, mut k) = (0.0, 0.0);
+    // Drawn as staircases: a count changes at a step's start and holds until the next change.
     for s in &t.steps {
-        m += f64::from(u8::from(s.miss));
-        k += s.skipped_releases as f64;
-        misses.push((seconds(s.start_ns), m));
-        skipped.push((seconds(s.start_ns), k));
+        let at = seconds(s.start_ns);
+        if s.miss {
+            misses.push((at, m));
+            m += 1.0;
+            misses.push((at, m));
+        }
+        if s.skipped_releases > 0 {
+            skipped.push((at, k));
+            k += s.skipped_releases as f64;
+            skipped.push((at, k));
+        }
     }
     let end = e.duration_ms as f64 / 1e3;
     misses.push((end, m));
