@@ -46,6 +46,15 @@ rate_hz = 100
 announce_ms = 50
 repetitions = 1
 transports = ["inproc", "rtps"]
+[timeline]
+log = "{euroc}"
+period_ms = 50
+duration_ms = 1500
+overload_from_ms = 500
+overload_until_ms = 1000
+overload_period_ms = 100
+overload_busy_ms = 120
+window_ms = 250
 "#
     )
 }
@@ -68,7 +77,7 @@ fn tiny_report_has_every_figure_and_section() {
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert!(String::from_utf8_lossy(&output.stdout).contains("report tiny (quick)"));
 
-    for stem in measure::report::FIGURES {
+    for stem in measure::report::FIGURES.into_iter().chain([measure::timeline::FIGURE]) {
         let svg = std::fs::read_to_string(out.join(format!("{stem}.svg"))).unwrap();
         assert!(svg.contains("<svg") && svg.contains("commit"), "{stem}.svg names no commit");
         let png = std::fs::read(out.join(format!("{stem}.png"))).unwrap();
@@ -81,7 +90,9 @@ fn tiny_report_has_every_figure_and_section() {
         assert!(at >= last, "section {section} out of order");
         last = at;
     }
-    for stem in measure::report::FIGURES {
+    let timeline_at = report.find(measure::timeline::SECTION).expect("the timeline section");
+    assert!(timeline_at < report.find(measure::report::SECTIONS[7]).unwrap(), "timeline before \"Not measured yet\"");
+    for stem in measure::report::FIGURES.into_iter().chain([measure::timeline::FIGURE]) {
         assert!(report.contains(&format!("]({stem}.svg)")), "report.md does not show {stem}");
     }
     assert!(report.contains("**every receiver is a separate process**"));
@@ -143,6 +154,16 @@ fn tiny_report_has_every_figure_and_section() {
     let expected: u64 =
         results["replay"].as_array().unwrap().iter().map(|r| r["latency"]["count"].as_u64().unwrap()).sum();
     assert_eq!(replay_latencies, expected, "one latency message per (write, receiver) of every replay run");
+    // The timeline ran on the real clock, so only what the scheduler guarantees whatever the timing is checked.
+    let timeline = &results["timeline"];
+    assert_eq!(timeline["clock"], "bica::clock::MonotonicClock");
+    assert_eq!(timeline["timeline"]["overlaps"], 0);
+    assert_eq!(timeline["trace_dropped"], 0);
+    let steps = timeline["timeline"]["steps"].as_array().unwrap();
+    assert!(!steps.is_empty());
+    assert_eq!(timeline["counters"]["runs"], steps.len());
+    assert!(steps.windows(2).all(|w| w[0]["finish_ns"].as_u64() <= w[1]["start_ns"].as_u64()));
+    assert!(timeline["overload_busy_steps"].as_u64().unwrap() > 0);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -20,6 +20,7 @@ use transport::fault::FaultConfig;
 use crate::partition::{self, PartitionConfig, PartitionResult};
 use crate::provenance::{DatasetChecksum, Provenance};
 use crate::run::{self, Link, RunConfig, RunResult};
+use crate::timeline::{self, TimelineExperiment, TimelineResult};
 use crate::workload::{self, Workload};
 
 /// An experiment file.
@@ -202,6 +203,9 @@ pub struct ExperimentSet {
     pub faults: FaultExperiment,
     /// Reconvergence after a partition.
     pub partition: PartitionExperiment,
+    /// The scheduler timeline of a detector under an injected overload ([`crate::timeline`]); optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeline: Option<TimelineExperiment>,
 }
 
 impl ExperimentSet {
@@ -210,7 +214,8 @@ impl ExperimentSet {
         (self.logs.len() * self.agents.len() * self.seeds.len() * self.transports.len()
             + self.payload.sizes.len()
             + self.faults.variants.len() * self.faults.transports.len()
-            + self.partition.repetitions as usize * self.partition.transports.len()) as u64
+            + self.partition.repetitions as usize * self.partition.transports.len()
+            + usize::from(self.timeline.is_some())) as u64
     }
 }
 
@@ -223,7 +228,8 @@ pub struct FaultRun {
     pub run: RunResult,
 }
 
-/// Everything a set measured.
+/// Everything a set measured. (`timeline` was added to schema version 1 without a bump: a new field, absent when
+/// the set has no timeline.)
 #[derive(Clone, Debug, Serialize)]
 pub struct Results {
     /// How it was obtained.
@@ -242,6 +248,9 @@ pub struct Results {
     pub faults: Vec<FaultRun>,
     /// Partition runs.
     pub partition: Vec<PartitionResult>,
+    /// The scheduler timeline, if the set has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timeline: Option<TimelineResult>,
     /// Wall-clock seconds of the whole set.
     pub seconds: f64,
 }
@@ -277,6 +286,13 @@ pub fn run_set(
                 .with_context(|| format!("cannot read {}", spec.path.display()))?;
             provenance.datasets.push(checksum);
         }
+    }
+    if let Some(path) = set.timeline.as_ref().map(|t| &t.log)
+        && seen.insert(path.clone(), ()).is_none()
+    {
+        let checksum =
+            DatasetChecksum::of(&root.join(path)).with_context(|| format!("cannot read {}", path.display()))?;
+        provenance.datasets.push(checksum);
     }
     for (i, seed) in set.seeds.iter().enumerate() {
         provenance.seeds.insert(format!("replay[{i}]"), *seed);
@@ -341,6 +357,14 @@ pub fn run_set(
             progress(&format!("partition {} seed {seed}", link.name()));
         }
     }
+    let timeline = match &set.timeline {
+        Some(experiment) => {
+            let result = timeline::run(experiment, root).context("scheduler timeline")?;
+            progress("scheduler timeline");
+            Some(result)
+        }
+        None => None,
+    };
     Ok(Results {
         provenance,
         experiment: experiment.to_owned(),
@@ -350,6 +374,7 @@ pub fn run_set(
         payload,
         faults,
         partition: partitions,
+        timeline,
         seconds: started.elapsed().as_secs_f64(),
     })
 }
@@ -370,6 +395,9 @@ mod tests {
             }
             assert!(set.faults.variants.iter().any(|v| v.config().is_none()), "a variant without faults");
             assert!(set.steps() > 0);
+            let timeline = set.timeline.as_ref().expect("the paper's sets measure the scheduler timeline");
+            timeline.validate().unwrap();
+            assert!(root.join(&timeline.log).is_file(), "{}", timeline.log.display());
         }
     }
 
@@ -377,5 +405,9 @@ mod tests {
     fn unknown_fields_are_refused() {
         let error = toml::from_str::<LogSpec>("path = \"a\"\nrate = \"1\"\nspeed = 2\n").unwrap_err();
         assert!(error.to_string().contains("speed"), "{error}");
+        let timeline = "log = \"a\"\nperiod_ms = 50\nduration_ms = 3000\noverload_from_ms = 1000\n\
+                        overload_until_ms = 2000\noverload_period_ms = 100\noverload_busy_ms = 120\nbusy_ms = 1\n";
+        let error = toml::from_str::<TimelineExperiment>(timeline).unwrap_err();
+        assert!(error.to_string().contains("busy_ms"), "{error}");
     }
 }

@@ -47,6 +47,22 @@ pub struct Chart {
     pub legend_upper_left: bool,
 }
 
+/// One panel of a figure of stacked panels ([`render_panels`]): a chart plus what only panels need.
+#[derive(Clone, Debug, Default)]
+pub struct Panel {
+    /// The chart drawn in the panel (its `footer` is not drawn: the figure has one footer).
+    pub chart: Chart,
+    /// Series drawn as markers only (crosses, no line), for events such as deadline misses.
+    pub markers: Vec<Series>,
+    /// A fixed horizontal range `(min, max)`, so stacked panels share their axis.
+    pub x_range: Option<(f64, f64)>,
+    /// A shaded horizontal interval `(from, to, legend)`, such as an overload window.
+    pub shaded: Option<(f64, f64, String)>,
+}
+
+/// Height in pixels of one panel of [`render_panels`].
+pub const PANEL_HEIGHT: u32 = 300;
+
 fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
@@ -111,18 +127,43 @@ where
 {
     let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing {}: {e:?}", chart.title);
     root.fill(&WHITE).map_err(error)?;
-    let footer_height = 16 * chart.footer.len() as u32 + 8;
-    let (plot, footer) = root.split_vertically(SIZE.1 - footer_height);
-    for (i, line) in chart.footer.iter().enumerate() {
-        footer
-            .draw_text(line, &(FONT, 12).into_font().color(&RGBColor(80, 80, 80)), (10, 4 + 16 * i as i32))
-            .map_err(error)?;
+    let plot = draw_footer(root, &chart.footer).map_err(error)?;
+    draw_plot(&plot, &Panel { chart: chart.clone(), ..Panel::default() })?;
+    root.present().map_err(error)?;
+    Ok(())
+}
+
+fn footer_height(lines: &[String]) -> u32 {
+    16 * lines.len() as u32 + 8
+}
+
+/// Writes the footer lines at the bottom of `root` and returns the area above them.
+fn draw_footer<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    lines: &[String],
+) -> Result<DrawingArea<DB, Shift>, DrawingAreaErrorKind<DB::ErrorType>> {
+    let (plot, footer) = root.split_vertically(root.dim_in_pixel().1 - footer_height(lines));
+    for (i, line) in lines.iter().enumerate() {
+        footer.draw_text(line, &(FONT, 12).into_font().color(&RGBColor(80, 80, 80)), (10, 4 + 16 * i as i32))?;
     }
+    Ok(plot)
+}
+
+fn draw_plot<DB: DrawingBackend>(plot: &DrawingArea<DB, Shift>, panel: &Panel) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let chart = &panel.chart;
+    let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing {}: {e:?}", chart.title);
     let usable = |(x, y): &(f64, f64)| (!chart.x_log || *x > 0.0) && (!chart.y_log || *y > 0.0);
-    let all = || chart.series.iter().flat_map(|s| s.points.iter().filter(|p| usable(p)));
-    let (x0, x1) = axis(all().map(|p| p.0), chart.x_log);
+    let all = || chart.series.iter().chain(&panel.markers).flat_map(|s| s.points.iter().filter(|p| usable(p)));
+    let (x0, x1) = match panel.x_range {
+        Some((lo, hi)) if chart.x_log => (lo.log10(), hi.log10()),
+        Some(range) => range,
+        None => axis(all().map(|p| p.0), chart.x_log),
+    };
     let (y0, y1) = axis(all().map(|p| p.1), chart.y_log);
-    let mut ctx = ChartBuilder::on(&plot)
+    let mut ctx = ChartBuilder::on(plot)
         .caption(&chart.title, (FONT, 20))
         .margin(12)
         .x_label_area_size(44)
@@ -143,6 +184,14 @@ where
         .draw()
         .map_err(error)?;
     let map = |(x, y): &(f64, f64)| (if x_log { x.log10() } else { *x }, if y_log { y.log10() } else { *y });
+    if let Some((from, to, name)) = &panel.shaded {
+        let shade = RGBColor(255, 170, 170).mix(0.35).filled();
+        let (from, to) = (map(&(*from, 1.0)).0, map(&(*to, 1.0)).0);
+        ctx.draw_series(std::iter::once(Rectangle::new([(from, y0), (to, y1)], shade)))
+            .map_err(error)?
+            .label(name)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], shade));
+    }
     for (i, series) in chart.series.iter().enumerate() {
         let colour = COLOURS[i % COLOURS.len()];
         let points: Vec<(f64, f64)> = series.points.iter().filter(|p| usable(p)).map(map).collect();
@@ -154,7 +203,17 @@ where
             ctx.draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled()))).map_err(error)?;
         }
     }
-    if chart.series.len() > 1 || chart.series.first().is_some_and(|s| !s.name.is_empty()) {
+    for (i, series) in panel.markers.iter().enumerate() {
+        // Red first: markers stand out from the first lines' blue, orange and green.
+        let colour = COLOURS[(3 + i) % COLOURS.len()];
+        let points: Vec<(f64, f64)> = series.points.iter().filter(|p| usable(p)).map(map).collect();
+        ctx.draw_series(points.iter().map(|&p| Cross::new(p, 5, colour.stroke_width(2))))
+            .map_err(error)?
+            .label(&series.name)
+            .legend(move |(x, y)| Cross::new((x + 9, y), 5, colour.stroke_width(2)));
+    }
+    let labelled = chart.series.len() > 1 || chart.series.first().is_some_and(|s| !s.name.is_empty());
+    if labelled || !panel.markers.is_empty() || panel.shaded.is_some() {
         ctx.configure_series_labels()
             .position(if chart.legend_upper_left {
                 SeriesLabelPosition::UpperLeft
@@ -166,6 +225,23 @@ where
             .border_style(RGBColor(180, 180, 180))
             .draw()
             .map_err(error)?;
+    }
+    Ok(())
+}
+
+fn draw_panels<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    panels: &[Panel],
+    footer: &[String],
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing a figure of {} panels: {e:?}", panels.len());
+    root.fill(&WHITE).map_err(error)?;
+    let plots = draw_footer(root, footer).map_err(error)?;
+    for (area, panel) in plots.split_evenly((panels.len().max(1), 1)).iter().zip(panels) {
+        draw_plot(area, panel)?;
     }
     root.present().map_err(error)?;
     Ok(())
@@ -181,6 +257,21 @@ pub fn render(chart: &Chart, dir: &Path, stem: &str) -> anyhow::Result<()> {
     draw(&SVGBackend::new(&svg, SIZE).into_drawing_area(), chart)?;
     let png = dir.join(format!("{stem}.png"));
     draw(&BitMapBackend::new(&png, SIZE).into_drawing_area(), chart)?;
+    Ok(())
+}
+
+/// Writes panels stacked vertically, [`PANEL_HEIGHT`] pixels each, with one footer under them, as `dir/stem.svg`
+/// and `dir/stem.png`.
+///
+/// # Errors
+/// A file that cannot be written, or a drawing error.
+pub fn render_panels(panels: &[Panel], footer: &[String], dir: &Path, stem: &str) -> anyhow::Result<()> {
+    register_font();
+    let size = (SIZE.0, PANEL_HEIGHT * panels.len().max(1) as u32 + footer_height(footer));
+    let svg = dir.join(format!("{stem}.svg"));
+    draw_panels(&SVGBackend::new(&svg, size).into_drawing_area(), panels, footer)?;
+    let png = dir.join(format!("{stem}.png"));
+    draw_panels(&BitMapBackend::new(&png, size).into_drawing_area(), panels, footer)?;
     Ok(())
 }
 
@@ -213,6 +304,35 @@ mod tests {
         let svg = std::fs::read_to_string(dir.join("cdf.svg")).unwrap();
         assert!(svg.contains("latency") && svg.contains("command: cortex report --quick") && svg.contains("N=2"));
         let png = std::fs::read(dir.join("cdf.png")).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn writes_stacked_panels_with_markers_and_a_shaded_interval() {
+        let dir = std::env::temp_dir().join(format!("measure-panels-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let line = |title: &str| Chart {
+            title: title.into(),
+            series: vec![Series { name: "rate".into(), points: vec![(0.0, 20.0), (1.0, 9.0), (2.0, 20.0)] }],
+            ..Chart::default()
+        };
+        let panels = [
+            Panel { chart: line("upper panel"), x_range: Some((0.0, 3.0)), ..Panel::default() },
+            Panel {
+                chart: line("lower panel"),
+                markers: vec![Series { name: "miss".into(), points: vec![(1.0, 9.0)] }],
+                x_range: Some((0.0, 3.0)),
+                shaded: Some((1.0, 2.0, "overload window".into())),
+            },
+        ];
+        render_panels(&panels, &["commit abc".into()], &dir, "panels").unwrap();
+        let svg = std::fs::read_to_string(dir.join("panels.svg")).unwrap();
+        for text in ["upper panel", "lower panel", "miss", "overload window", "commit abc"] {
+            assert!(svg.contains(text), "{text} missing from the svg");
+        }
+        assert!(svg.contains(&format!("height=\"{}\"", 2 * PANEL_HEIGHT + 24)), "two panels and one footer line");
+        let png = std::fs::read(dir.join("panels.png")).unwrap();
         assert_eq!(&png[1..4], b"PNG");
         std::fs::remove_dir_all(&dir).unwrap();
     }

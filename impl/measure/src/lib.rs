@@ -17,6 +17,8 @@
 //!   attributes of a chosen size at a chosen rate.
 //! - [`partition`] — agents (`agent::Agent`, with anti-entropy) on the in-process bus: the time to reconverge
 //!   after a partition heals.
+//! - [`timeline`] — the scheduler timeline of a detector (the `camera-detector` role of `perception`) on the real
+//!   BICA runtime and clock, under an overload injected by another component of the same scheduler.
 //! - [`experiment`] — experiment files (TOML) and the runner of a set of experiments.
 //! - [`figures`] — line charts as SVG and PNG with an embedded font (no system font libraries).
 //! - [`provenance`] — commit, rustc, machine (cores, memory, CPU model from `/proc`), dataset checksums.
@@ -37,6 +39,7 @@ pub mod provenance;
 pub mod record;
 pub mod report;
 pub mod run;
+pub mod timeline;
 pub mod workload;
 
 /// Version of the JSON result schema written by `cortex report` (`results.json`).

@@ -14,11 +14,13 @@ use crate::figures::{self, Chart, Series};
 use crate::latency::{self, Percentiles};
 use crate::run::RunResult;
 
-/// Stems of the figures a report contains (each written as `.svg` and `.png`).
+/// Stems of the figures a report contains (each written as `.svg` and `.png`); a set with a timeline adds
+/// [`crate::timeline::FIGURE`].
 pub const FIGURES: [&str; 4] =
     ["latency_cdf_by_agents", "latency_vs_payload", "bandwidth_vs_agents", "convergence_windows"];
 
-/// Headings of the sections of `report.md`, in order.
+/// Headings of the sections of `report.md`, in order; [`crate::timeline::SECTION`] comes just before "Not measured
+/// yet".
 pub const SECTIONS: [&str; 10] = [
     "## How this report was obtained",
     "## Beside the paper's claims and the C++ implementation",
@@ -198,6 +200,11 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
         ..Chart::default()
     };
     figures::render(&chart, out, FIGURES[3])?;
+
+    if let Some(timeline) = &results.timeline {
+        let how = "none: one BICA runtime on one thread, real monotonic clock, overload injected by another component";
+        crate::timeline::render_figure(timeline, footer(how), out)?;
+    }
 
     let runs = crate::record::write_runs(results, out)?;
     std::fs::write(out.join("report.md"), markdown(results, &runs)).context("cannot write report.md")?;
@@ -538,13 +545,17 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
     }
     let _ = writeln!(md);
 
+    crate::timeline::section(&mut md, r.timeline.as_ref());
+
     let _ = writeln!(md, "{}\n", SECTIONS[7]);
     let _ = writeln!(
         md,
         "- The full agent layer (`agent::Agent`: envelope, anti-entropy, lock) on the measured path: receivers apply \
          the source's deltas to a bare `dsr::Replica`.\n\
          - Partitions with agents as separate processes (the partition runs put their agents in one process).\n\
-         - BICA statistics of the detector roles and the scheduler timeline of a detector under an injected overload.\n"
+         - BICA statistics of the detector roles during the replays (`cortex replay --transport rtps --roles ...` \
+         prints them){}.\n",
+        if r.timeline.is_some() { "" } else { "; the scheduler timeline of a detector under an injected overload" }
     );
 
     let _ = writeln!(md, "{}\n", SECTIONS[8]);
