@@ -46,6 +46,11 @@ rate_hz = 100
 announce_ms = 50
 repetitions = 1
 transports = ["inproc", "rtps"]
+[roles]
+log = {{ path = "{euroc}", rate = "4" }}
+agents = 3
+roles = ["camera-detector"]
+faults = "loss=0.1"
 [timeline]
 log = "{euroc}"
 period_ms = 50
@@ -154,6 +159,14 @@ fn tiny_report_has_every_figure_and_section() {
     let expected: u64 =
         results["replay"].as_array().unwrap().iter().map(|r| r["latency"]["count"].as_u64().unwrap()).sum();
     assert_eq!(replay_latencies, expected, "one latency message per (write, receiver) of every replay run");
+    // The roles replay: real agent processes, the detector's statistics by remote call, equal digests despite loss.
+    let roles = &results["roles"];
+    assert_eq!(roles["digests_equal"], true, "{roles}");
+    assert_eq!(roles["agents"].as_array().unwrap().len(), 3);
+    assert_eq!(roles["agents"][1]["role"], "camera-detector");
+    assert!(roles["agents"][1]["components"].as_array().unwrap().iter().any(|c| c["runs"].as_u64() > Some(0)));
+    assert!(report.contains(measure::roles::SECTION));
+
     // The timeline ran on the real clock, so only what the scheduler guarantees whatever the timing is checked.
     let timeline = &results["timeline"];
     assert_eq!(timeline["clock"], "bica::clock::MonotonicClock");

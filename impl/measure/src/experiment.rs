@@ -19,6 +19,7 @@ use transport::fault::FaultConfig;
 
 use crate::partition::{self, PartitionConfig, PartitionResult};
 use crate::provenance::{DatasetChecksum, Provenance};
+use crate::roles::{self, RolesExperiment, RolesResult};
 use crate::run::{self, Link, RunConfig, RunResult};
 use crate::timeline::{self, TimelineExperiment, TimelineResult};
 use crate::workload::{self, Workload};
@@ -206,6 +207,9 @@ pub struct ExperimentSet {
     /// The scheduler timeline of a detector under an injected overload ([`crate::timeline`]); optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timeline: Option<TimelineExperiment>,
+    /// Detector roles in agent processes during a replay over RTPS ([`crate::roles`]); optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roles: Option<RolesExperiment>,
 }
 
 impl ExperimentSet {
@@ -215,7 +219,8 @@ impl ExperimentSet {
             + self.payload.sizes.len()
             + self.faults.variants.len() * self.faults.transports.len()
             + self.partition.repetitions as usize * self.partition.transports.len()
-            + usize::from(self.timeline.is_some())) as u64
+            + usize::from(self.timeline.is_some())
+            + usize::from(self.roles.is_some())) as u64
     }
 }
 
@@ -251,6 +256,9 @@ pub struct Results {
     /// The scheduler timeline, if the set has one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub timeline: Option<TimelineResult>,
+    /// The detector roles' replay over RTPS, if the set has one (added to schema version 1 like `timeline`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub roles: Option<RolesResult>,
     /// Wall-clock seconds of the whole set.
     pub seconds: f64,
 }
@@ -287,12 +295,12 @@ pub fn run_set(
             provenance.datasets.push(checksum);
         }
     }
-    if let Some(path) = set.timeline.as_ref().map(|t| &t.log)
-        && seen.insert(path.clone(), ()).is_none()
-    {
-        let checksum =
-            DatasetChecksum::of(&root.join(path)).with_context(|| format!("cannot read {}", path.display()))?;
-        provenance.datasets.push(checksum);
+    for path in set.timeline.as_ref().map(|t| &t.log).into_iter().chain(set.roles.as_ref().map(|r| &r.log.path)) {
+        if seen.insert(path.clone(), ()).is_none() {
+            let checksum =
+                DatasetChecksum::of(&root.join(path)).with_context(|| format!("cannot read {}", path.display()))?;
+            provenance.datasets.push(checksum);
+        }
     }
     for (i, seed) in set.seeds.iter().enumerate() {
         provenance.seeds.insert(format!("replay[{i}]"), *seed);
@@ -365,6 +373,15 @@ pub fn run_set(
         }
         None => None,
     };
+    let roles = match &set.roles {
+        Some(experiment) => {
+            let program = receiver_program.context("the roles replay needs the cortex binary to start agents")?;
+            let result = roles::run(experiment, root, program, set.rtps_domain).context("detector roles replay")?;
+            progress("detector roles over RTPS");
+            Some(result)
+        }
+        None => None,
+    };
     Ok(Results {
         provenance,
         experiment: experiment.to_owned(),
@@ -375,6 +392,7 @@ pub fn run_set(
         faults,
         partition: partitions,
         timeline,
+        roles,
         seconds: started.elapsed().as_secs_f64(),
     })
 }

@@ -23,6 +23,8 @@
 //! - [`figures`] — line charts as SVG and PNG with an embedded font (no system font libraries).
 //! - [`provenance`] — commit, rustc, machine (cores, memory, CPU model from `/proc`), dataset checksums.
 //!
+//! - [`roles`] — detector roles in `cortex agent` processes during a replay over RTPS: their BICA statistics
+//!   and the convergence of the graph, by running `cortex replay --transport rtps --roles ... --json`.
 //! - [`report`] — `results.json`, the figures and `report.md` of an experiment set.
 //! - [`record`] — runs as MCAP files that Foxglove opens: metrics on JSON-schema channels, the graph deltas as
 //!   published.
@@ -38,6 +40,7 @@ pub mod process;
 pub mod provenance;
 pub mod record;
 pub mod report;
+pub mod roles;
 pub mod run;
 pub mod timeline;
 pub mod workload;

@@ -546,6 +546,7 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
     let _ = writeln!(md);
 
     crate::timeline::section(&mut md, r.timeline.as_ref());
+    crate::roles::section(&mut md, r.set.roles.as_ref(), r.roles.as_ref());
 
     let _ = writeln!(md, "{}\n", SECTIONS[7]);
     let _ = writeln!(
@@ -553,9 +554,13 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
         "- The full agent layer (`agent::Agent`: envelope, anti-entropy, lock) on the measured path: receivers apply \
          the source's deltas to a bare `dsr::Replica`.\n\
          - Partitions with agents as separate processes (the partition runs put their agents in one process).\n\
-         - BICA statistics of the detector roles during the replays (`cortex replay --transport rtps --roles ...` \
-         prints them){}.\n",
-        if r.timeline.is_some() { "" } else { "; the scheduler timeline of a detector under an injected overload" }
+         {}{}",
+        if r.roles.is_some() {
+            ""
+        } else {
+            "- BICA statistics of detector roles during a replay (no `roles` section).\n"
+        },
+        if r.timeline.is_some() { "" } else { "- The scheduler timeline of a detector under an injected overload.\n" }
     );
 
     let _ = writeln!(md, "{}\n", SECTIONS[8]);
