@@ -5,7 +5,8 @@
 //! discovery or QoS; the transport never sees graphs. Three implementations:
 //!
 //! - [`rtps::RtpsTransport`]: RTPS through the `rustdds` DDS implementation (the default for real agents): reliable,
-//!   keep-all, explicit resource limits on every reader and writer, a bounded inbox, pacing of large samples.
+//!   keep-all, explicit resource limits on every reader and writer, readers in a participant apart from the writers',
+//!   a bounded inbox, pacing of large samples.
 //! - [`inproc::Bus`] / [`inproc::InProcTransport`]: an in-process bus for tests and deterministic simulation.
 //! - [`fault::FaultInjector`]: seeded loss, duplication, reordering, delay and partitions, wrapped around either.
 //!

@@ -1,16 +1,31 @@
 //! RTPS through `rustdds`: the transport real agents use.
 //!
-//! One DDS domain participant per agent, one non-keyed topic per [`Channel`] named `{prefix}_{channel}`, every
-//! writer and reader RELIABLE + KEEP_ALL + VOLATILE with **explicit [`ResourceLimits`] (`rustdds` otherwise keeps
-//! only 64 samples per reader)**. A sample travels as a CDR `sequence<octet>` (4-byte length, then the bytes), so
-//! any DDS implementation can read it with a one-field IDL type.
+//! Two DDS domain participants per agent (one for its writers, one for its readers), one non-keyed topic per
+//! [`Channel`] named `{prefix}_{channel}`, every writer and reader RELIABLE + KEEP_ALL + VOLATILE with **explicit
+//! [`ResourceLimits`] (`rustdds` otherwise keeps only 64 samples per reader)**. A sample travels as a CDR
+//! `sequence<octet>` (4-byte length, then the bytes), so any DDS implementation can read it with a one-field IDL
+//! type.
 //!
 //! A receiving thread waits on the readers with `mio` and moves samples into a **bounded inbox**; when the inbox is
 //! full it stops taking, the readers' caches fill, and the reliable protocol pushes back on the writers. Samples
-//! this participant wrote itself are skipped. **Large samples are paced**: after every [`RtpsConfig::pace_bytes`]
-//! of large samples the writer waits (bounded) for acknowledgements, so a burst of 1 MB frames is delivered rather
-//! than stalled. Domain id and topic prefix are configurable so several graphs can share a host; discovery uses
-//! the standard unicast locators and works on loopback without network configuration.
+//! this transport wrote itself are skipped.
+//!
+//! **The readers live in a second participant** (by default, see [`RtpsConfig::separate_reader_participant`]), so a
+//! writer never has a reader of its own participant. In `rustdds` 0.15 a same-participant reader keeps the writer's
+//! fallback route (multicast to the user-traffic group), while a confirmed same-host reader gets a loopback unicast
+//! route, and a write goes to the union: every same-host reader, which also listens on the multicast group, gets
+//! each datagram twice. A sample larger than one datagram's budget (about 1.4 KB: the budget is the smallest path
+//! MTU of the reader's advertised locators, the LAN one included) goes as 256-byte DATA_FRAG fragments, and a second
+//! copy whose first datagrams land in the first copy's reassembly leaves an incomplete reassembly buffer behind.
+//! Those live 10 s, a reader keeps at most 128, and at the cap a reliable reader evicts the newest: every new
+//! fragmented sample is then discarded until old buffers expire, and delivery stalls for seconds (issue 5; the
+//! SICK log's 10–13 KB deltas at 30 Hz reach the cap after about 8 s). With no same-participant reader, a same-host
+//! writer sends one loopback copy per reader, and fragmented samples reassemble once.
+//!
+//! **Large samples are paced**: after every [`RtpsConfig::pace_bytes`] of large samples the writer waits (bounded)
+//! for acknowledgements, so a burst of 1 MB frames is delivered rather than stalled. Domain id and topic prefix are
+//! configurable so several graphs can share a host; discovery uses the standard unicast locators and works on
+//! loopback without network configuration.
 //!
 //! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B), the RTPS DATA and
 //! INFO_TS submessages (36 B), and one RTPS header plus UDP/IPv4 header (48 B) per datagram of up to 64 KiB;
@@ -48,6 +63,10 @@ pub struct RtpsConfig {
     pub pace_bytes: usize,
     /// Longest wait for acknowledgements when pacing, and longest blocking of a write on a full send window.
     pub max_blocking: Duration,
+    /// Create the readers in a second DDS participant, so that no writer has a reader in its own participant (see
+    /// the module documentation: with one shared participant, fragmented samples are sent twice to same-host
+    /// readers and delivery stalls). `false` keeps one participant per transport, for comparison only.
+    pub separate_reader_participant: bool,
 }
 
 impl Default for RtpsConfig {
@@ -61,6 +80,7 @@ impl Default for RtpsConfig {
             large_sample_bytes: 64 << 10,
             pace_bytes: 4 << 20,
             max_blocking: Duration::from_secs(2),
+            separate_reader_participant: true,
         }
     }
 }
@@ -170,9 +190,10 @@ pub fn qos(config: &RtpsConfig) -> QosPolicies {
         .build()
 }
 
-/// A DDS participant with one writer and one reader per channel.
+/// One writer and one reader per channel: the writers in a publishing DDS participant, the readers in a subscribing
+/// one (the same participant if [`RtpsConfig::separate_reader_participant`] is off).
 pub struct RtpsTransport {
-    // Writers before the participant, so they are dropped first.
+    // Writers and the receiving thread (which owns the readers) before the participants, so they are dropped first.
     writers: Vec<Mutex<Writer>>,
     inbox: Receiver<Sample>,
     stop: Arc<AtomicBool>,
@@ -181,7 +202,8 @@ pub struct RtpsTransport {
     local: EndpointId,
     unpaced_large_bytes: AtomicUsize,
     config: RtpsConfig,
-    _participant: DomainParticipant,
+    _publishing: DomainParticipant,
+    _subscribing: Option<DomainParticipant>,
 }
 
 impl std::fmt::Debug for RtpsTransport {
@@ -204,35 +226,49 @@ fn endpoint_of(guid: rustdds::GUID) -> EndpointId {
 }
 
 impl RtpsTransport {
-    /// Joins the DDS domain and starts the receiving thread.
+    /// Joins the DDS domain (one or two participants, see [`RtpsConfig::separate_reader_participant`]) and starts
+    /// the receiving thread.
     ///
     /// # Errors
-    /// [`TransportError::Setup`] if the participant, a topic, a reader or a writer cannot be created.
+    /// [`TransportError::Setup`] if a participant, a topic, a reader or a writer cannot be created.
     pub fn new(config: RtpsConfig) -> Result<Self, TransportError> {
-        let participant = DomainParticipant::new(config.domain_id).map_err(|e| TransportError::Setup {
-            what: format!("participant in domain {}", config.domain_id),
-            detail: format!("{e:?}"),
-        })?;
+        let join = |role: &str| {
+            DomainParticipant::new(config.domain_id).map_err(|e| TransportError::Setup {
+                what: format!("{role} participant in domain {}", config.domain_id),
+                detail: format!("{e:?}"),
+            })
+        };
+        let publishing = join("publishing")?;
+        let subscribing = if config.separate_reader_participant { Some(join("subscribing")?) } else { None };
         let qos = qos(&config);
-        let publisher = participant.create_publisher(&qos).map_err(setup("publisher"))?;
-        let subscriber = participant.create_subscriber(&qos).map_err(setup("subscriber"))?;
+        let publisher = publishing.create_publisher(&qos).map_err(setup("publisher"))?;
+        let subscriber =
+            subscribing.as_ref().unwrap_or(&publishing).create_subscriber(&qos).map_err(setup("subscriber"))?;
         let mut writers = Vec::new();
         let mut readers = Vec::new();
         for channel in Channel::ALL {
             let name = format!("{}_{}", config.topic_prefix, channel.name());
-            let topic = participant
-                .create_topic(name.clone(), "cortex::Envelope".into(), &qos, TopicKind::NoKey)
-                .map_err(setup(format!("topic {name}")))?;
+            let topic = |participant: &DomainParticipant| {
+                participant
+                    .create_topic(name.clone(), "cortex::Envelope".into(), &qos, TopicKind::NoKey)
+                    .map_err(setup(format!("topic {name}")))
+            };
+            let written = topic(&publishing)?;
+            let read = match &subscribing {
+                Some(participant) => topic(participant)?,
+                None => written.clone(),
+            };
             let writer = publisher
-                .create_datawriter_no_key::<Payload, OctetsAdapter>(&topic, Some(qos.clone()))
+                .create_datawriter_no_key::<Payload, OctetsAdapter>(&written, Some(qos.clone()))
                 .map_err(setup(format!("writer of {name}")))?;
             let reader = subscriber
-                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&topic, Some(qos.clone()))
+                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&read, Some(qos.clone()))
                 .map_err(setup(format!("reader of {name}")))?;
             writers.push(Mutex::new(writer));
             readers.push((channel, reader));
         }
-        let local = endpoint_of(participant.guid());
+        // Samples are tagged with their writer's GUID prefix: the publishing participant's.
+        let local = endpoint_of(publishing.guid());
         let (sender, inbox) = bounded(config.inbox_capacity.max(1));
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(Counters::default());
@@ -253,7 +289,8 @@ impl RtpsTransport {
             local,
             unpaced_large_bytes: AtomicUsize::new(0),
             config,
-            _participant: participant,
+            _publishing: publishing,
+            _subscribing: subscribing,
         })
     }
 
