@@ -232,7 +232,7 @@ struct Summary {
     faults: Option<String>,
     /// Over RTPS: each agent's graph at the end, the bridge first.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    agent_reports: Vec<super::replay_rtps::AgentReport>,
+    agent_reports: Vec<measure::roles::AgentRow>,
     /// Over RTPS: milliseconds from the end of the replay until every agent had the bridge's digest.
     #[serde(skip_serializing_if = "Option::is_none")]
     converged_ms: Option<f64>,

@@ -19,7 +19,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result, bail};
-use serde::Serialize;
+
+use measure::roles::{AgentRow, ComponentRow};
 
 use super::agent::{AgentTransport, Played, Role, play_log, start_rtps_agent};
 
@@ -68,50 +69,6 @@ pub struct RtpsReplay {
     pub record: Option<std::path::PathBuf>,
 }
 
-/// BICA statistics of one component of a role, fetched over a remote call at the end of the replay.
-#[derive(Debug, Clone, Serialize)]
-pub struct ComponentSummary {
-    /// Component type name.
-    pub name: String,
-    /// Nominal frequency.
-    pub nominal_hz: f64,
-    /// Frequency achieved.
-    pub achieved_hz: f64,
-    /// Steps run.
-    pub runs: u64,
-    /// Deadline misses.
-    pub misses: u64,
-    /// Releases skipped after overruns.
-    pub skipped_releases: u64,
-    /// 99th percentile of lateness, ms.
-    pub lateness_p99_ms: f64,
-    /// 99th percentile of wall time per step, ms.
-    pub wall_p99_ms: f64,
-}
-
-/// One agent's last report.
-#[derive(Debug, Clone, Serialize)]
-pub struct AgentReport {
-    /// Agent id (1 is the bridge).
-    pub id: u32,
-    /// Its role (`bridge`, `plain`, or a BICA role).
-    pub role: String,
-    /// Nodes in its graph.
-    pub nodes: u64,
-    /// Its graph digest.
-    pub digest: String,
-    /// Samples it received.
-    pub samples_received: u64,
-    /// Samples it published.
-    pub samples_sent: u64,
-    /// A role's BICA statistics just before it was quiesced (`runtime.components` over a remote call).
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub components: Vec<ComponentSummary>,
-    /// Why the statistics are missing, if the call failed.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub components_error: Option<String>,
-}
-
 /// What an RTPS replay did.
 #[derive(Debug)]
 pub struct RtpsOutcome {
@@ -122,7 +79,7 @@ pub struct RtpsOutcome {
     /// Bytes of samples the bridge published during the replay.
     pub bridge_bytes: u64,
     /// Every agent's last report, the bridge first.
-    pub agents: Vec<AgentReport>,
+    pub agents: Vec<AgentRow>,
     /// Whether every agent reported the bridge's digest.
     pub digests_equal: bool,
     /// Milliseconds from the end of the replay until every agent reported the bridge's digest.
@@ -201,8 +158,8 @@ fn role_name(role: Role) -> String {
     clap::ValueEnum::to_possible_value(&role).map(|v| v.get_name().to_owned()).unwrap_or_default()
 }
 
-fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentReport {
-    AgentReport {
+fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentRow {
+    AgentRow {
         id,
         role: role.to_owned(),
         nodes: status["nodes"].as_u64().unwrap_or(0),
@@ -215,7 +172,7 @@ fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentReport {
 }
 
 /// A role's BICA statistics, by a remote call from the bridge agent.
-fn role_statistics(bridge: &agent::Agent<AgentTransport>, id: u32) -> Result<Vec<ComponentSummary>, String> {
+fn role_statistics(bridge: &agent::Agent<AgentTransport>, id: u32) -> Result<Vec<ComponentRow>, String> {
     let reply: bica::service::ComponentsReply = bridge
         .call(agent::AgentId(id), bica::service::COMPONENTS, &(), Duration::from_secs(2))
         .map_err(|e| e.to_string())?;
@@ -224,7 +181,7 @@ fn role_statistics(bridge: &agent::Agent<AgentTransport>, id: u32) -> Result<Vec
         .statistics
         .components
         .into_iter()
-        .map(|c| ComponentSummary {
+        .map(|c| ComponentRow {
             name: c.name,
             nominal_hz: c.nominal_hz,
             achieved_hz: c.achieved_hz,
@@ -341,7 +298,7 @@ pub fn replay(
         }
     }
     let status = bridge.status();
-    let mut agents = vec![AgentReport {
+    let mut agents = vec![AgentRow {
         id: 1,
         role: "bridge".to_owned(),
         nodes: status.nodes as u64,

@@ -46,49 +46,6 @@ const STOP: u64 = u64::MAX - 2;
 /// How long a receiver waits for its first probe before giving up.
 const FIRST_PROBE_WAIT: Duration = Duration::from_secs(60);
 
-/// Fault injection of a receiver process, as JSON (`transport::fault::FaultConfig`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct FaultSpecWire {
-    /// Probability that a received sample is lost.
-    pub loss: f64,
-    /// Probability that a received sample is delivered twice.
-    pub duplicate: f64,
-    /// Probability that a sample gets an extra delay of up to `reorder_ns`.
-    pub reorder: f64,
-    /// Largest extra delay of a reordered sample.
-    pub reorder_ns: u64,
-    /// Every sample is held between these many nanoseconds (uniform).
-    pub delay_ns: (u64, u64),
-    /// Most samples held at once.
-    pub max_held: usize,
-}
-
-impl From<FaultConfig> for FaultSpecWire {
-    fn from(c: FaultConfig) -> Self {
-        FaultSpecWire {
-            loss: c.loss,
-            duplicate: c.duplicate,
-            reorder: c.reorder,
-            reorder_ns: c.reorder_ns,
-            delay_ns: c.delay_ns,
-            max_held: c.max_held,
-        }
-    }
-}
-
-impl From<FaultSpecWire> for FaultConfig {
-    fn from(c: FaultSpecWire) -> Self {
-        FaultConfig {
-            loss: c.loss,
-            duplicate: c.duplicate,
-            reorder: c.reorder,
-            reorder_ns: c.reorder_ns,
-            delay_ns: c.delay_ns,
-            max_held: c.max_held,
-        }
-    }
-}
-
 /// What a receiver process is told (`--spec`, JSON).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -106,62 +63,11 @@ pub struct ReceiverSpec {
     /// Seed of the fault injector.
     pub seed: u64,
     /// Faults on what this receiver receives.
-    pub faults: Option<FaultSpecWire>,
+    pub faults: Option<FaultConfig>,
     /// Capacity of the receiver's inbox.
     pub inbox_capacity: usize,
     /// Give up after this long without a sample, once the first probe has arrived.
     pub settle_ms: u64,
-}
-
-/// Counters of a receiver's transport, as JSON (`transport::TransportStats`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct StatsWire {
-    /// Samples published.
-    pub samples_sent: u64,
-    /// Bytes of samples published.
-    pub payload_bytes_sent: u64,
-    /// Wire bytes of publishing, as the transport accounts for them.
-    pub wire_bytes_sent: u64,
-    /// Samples received.
-    pub samples_received: u64,
-    /// Bytes of samples received.
-    pub payload_bytes_received: u64,
-    /// Samples dropped at a full queue.
-    pub dropped_full: u64,
-    /// Samples dropped by the fault injector.
-    pub dropped_injected: u64,
-    /// Extra copies from the fault injector.
-    pub duplicated_injected: u64,
-}
-
-impl From<TransportStats> for StatsWire {
-    fn from(s: TransportStats) -> Self {
-        StatsWire {
-            samples_sent: s.samples_sent,
-            payload_bytes_sent: s.payload_bytes_sent,
-            wire_bytes_sent: s.wire_bytes_sent,
-            samples_received: s.samples_received,
-            payload_bytes_received: s.payload_bytes_received,
-            dropped_full: s.dropped_full,
-            dropped_injected: s.dropped_injected,
-            duplicated_injected: s.duplicated_injected,
-        }
-    }
-}
-
-impl From<StatsWire> for TransportStats {
-    fn from(s: StatsWire) -> Self {
-        TransportStats {
-            samples_sent: s.samples_sent,
-            payload_bytes_sent: s.payload_bytes_sent,
-            wire_bytes_sent: s.wire_bytes_sent,
-            samples_received: s.samples_received,
-            payload_bytes_received: s.payload_bytes_received,
-            dropped_full: s.dropped_full,
-            dropped_injected: s.dropped_injected,
-            duplicated_injected: s.duplicated_injected,
-        }
-    }
 }
 
 /// What a receiver process prints when it stops (one JSON line).
@@ -176,7 +82,7 @@ pub struct ReceiverReport {
     /// Bytes of probes and run control received (not part of the workload).
     pub probe_bytes: u64,
     /// Its transport's counters.
-    pub stats: StatsWire,
+    pub stats: TransportStats,
     /// CPU time of the whole process from its first probe until it stopped, ns (`getrusage`).
     pub cpu_ns: Option<u64>,
     /// Peak resident memory of the process, bytes (`VmHWM`).
@@ -203,7 +109,7 @@ pub fn receiver_main(spec: &ReceiverSpec) -> anyhow::Result<ReceiverReport> {
     .context("cannot create an RTPS participant")?;
     let transport: Box<dyn Transport> = match spec.faults {
         Some(faults) => {
-            let plan = FaultPlan::new(spec.seed.wrapping_add(u64::from(spec.replica)), faults.into());
+            let plan = FaultPlan::new(spec.seed.wrapping_add(u64::from(spec.replica)), faults);
             Box::new(plan.wrap(rtps, Arc::new(clock) as Arc<dyn Clock>))
         }
         None => Box::new(rtps),
@@ -250,7 +156,7 @@ pub fn receiver_main(spec: &ReceiverSpec) -> anyhow::Result<ReceiverReport> {
         applied_at: receiving.applied_at,
         refused: receiving.refused,
         probe_bytes: receiving.probe_bytes,
-        stats: transport.stats().into(),
+        stats: transport.stats(),
         cpu_ns,
         peak_rss_bytes: peak_rss_bytes(),
         ended: ended.to_owned(),
@@ -346,7 +252,7 @@ pub(crate) fn run(workload: &Workload, config: &RunConfig, domain_id: u16) -> an
             writes: workload.writes.len(),
             origin_ns: clock.origin_ns(),
             seed: config.seed,
-            faults: config.faults.map(Into::into),
+            faults: config.faults,
             inbox_capacity: config.inbox_capacity,
             settle_ms: config.settle_timeout.as_millis() as u64 + 5_000,
         };
@@ -369,7 +275,7 @@ pub(crate) fn run(workload: &Workload, config: &RunConfig, domain_id: u16) -> an
         outcomes.push(ReceiverOutcome {
             applied_at: report.applied_at,
             refused: report.refused,
-            stats: report.stats.into(),
+            stats: report.stats,
             cpu_ns: report.cpu_ns,
             digest: Digest(report.digest),
             probe_bytes: report.probe_bytes,

@@ -33,7 +33,7 @@ pub struct RolesExperiment {
     pub faults: Option<String>,
 }
 
-/// One component's BICA statistics, as `cortex replay` reports them.
+/// One component's BICA statistics, as `cortex replay` reports them (it uses this type).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 pub struct ComponentRow {
     /// Component type name.
@@ -54,7 +54,7 @@ pub struct ComponentRow {
     pub wall_p99_ms: f64,
 }
 
-/// One agent at the end of the replay.
+/// One agent at the end of the replay, as `cortex replay` reports it (it uses this type).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 pub struct AgentRow {
     /// Agent id (1 is the bridge).
@@ -67,11 +67,13 @@ pub struct AgentRow {
     pub digest: String,
     /// Samples it received.
     pub samples_received: u64,
-    /// The role's components.
-    #[serde(default)]
+    /// Samples it published.
+    pub samples_sent: u64,
+    /// A role's components, with their statistics just before the role was quiesced.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub components: Vec<ComponentRow>,
     /// Why the statistics are missing, if the remote call failed.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub components_error: Option<String>,
 }
 

@@ -17,8 +17,8 @@ use bytes::Bytes;
 use crate::rng::SplitMix64;
 use crate::{Channel, Clock, EndpointId, Sample, Transport, TransportError, TransportStats};
 
-/// Probabilities and delays of injected faults.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Probabilities and delays of injected faults (serde: so a process can hand them to another).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FaultConfig {
     /// Probability that a received sample is lost.
     pub loss: f64,
