@@ -17,6 +17,8 @@
 //!   after a partition heals.
 //! - [`experiment`] — experiment files (TOML) and the runner of a set of experiments.
 //! - [`figures`] — line charts as SVG and PNG with an embedded font (no system font libraries).
+//! - [`netns`] — exact wire bytes: re-run a measurement in a fresh network namespace and read its loopback
+//!   counters ([`netns::LoopbackCounters`]) at phase boundaries; says why when a namespace cannot be made.
 //! - [`provenance`] — commit, rustc, machine (cores, memory, CPU model from `/proc`), dataset checksums.
 //!
 //! - [`report`] — `results.json`, the figures and `report.md` of an experiment set.
@@ -27,6 +29,7 @@ pub mod clock;
 pub mod experiment;
 pub mod figures;
 pub mod latency;
+pub mod netns;
 pub mod partition;
 pub mod provenance;
 pub mod report;

@@ -12,9 +12,21 @@
 //! than stalled. Domain id and topic prefix are configurable so several graphs can share a host; discovery uses
 //! the standard unicast locators and works on loopback without network configuration.
 //!
+//! **Multicast** ([`RtpsConfig::multicast`]). A `rustdds` writer sends a sample meant for every matched reader
+//! with "multicast preferred": one datagram per distinct route, and a reader's route is its advertised multicast
+//! locator (239.255.0.1, user-traffic port) on the interface its traffic was seen on — *unless* the reader is
+//! confirmed to be on this host and the participant prefers loopback for same-host peers (`rustdds`'s
+//! `same_host_loopback`, on by default), in which case every reader gets its own unicast copy over loopback.
+//! [`Multicast::On`] turns that preference off, so same-host readers share one multicast datagram; it needs a
+//! multicast-capable interface for discovery (on one host: `ip link set lo multicast on` and a 224.0.0.0/4 route
+//! on `lo`). [`Multicast::Auto`], the default, does so exactly when the loopback interface is up and
+//! multicast-capable ([`loopback_multicast_capable`]).
+//!
 //! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B), the RTPS DATA and
 //! INFO_TS submessages (36 B), and one RTPS header plus UDP/IPv4 header (48 B) per datagram of up to 64 KiB;
-//! acknowledgements and heartbeats are not seen by this layer.
+//! acknowledgements and heartbeats are not seen by this layer, and the estimate counts one copy per sample
+//! whatever the number of readers. Exact socket-level figures come from a measurement in a fresh network
+//! namespace (`measure::netns`, `cortex bench rtt|fanout`).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -25,9 +37,44 @@ use bytes::Bytes;
 use crossbeam_channel::{Receiver, SendTimeoutError, Sender, bounded};
 use rustdds::no_key::{DataWriter, Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter, SimpleDataReader};
 use rustdds::policy::{Durability, History, Reliability, ResourceLimits};
-use rustdds::{DomainParticipant, QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, TopicKind};
+use rustdds::{
+    DomainParticipant, DomainParticipantBuilder, QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier,
+    TopicKind,
+};
 
 use crate::{Channel, Counters, EndpointId, Sample, Transport, TransportError, TransportStats};
+
+/// Whether user data to several same-host readers goes out once, as multicast (see the module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Multicast {
+    /// [`Multicast::On`] when the loopback interface is up and multicast-capable, [`Multicast::Off`] otherwise.
+    #[default]
+    Auto,
+    /// Same-host readers share one multicast datagram (`rustdds` `same_host_loopback(false)`). Discovery then
+    /// needs a multicast-capable interface, since the unicast "localhost peers" announcements are off too.
+    On,
+    /// `rustdds`'s default: a reader confirmed to be on this host gets its own unicast copy over loopback.
+    Off,
+}
+
+impl Multicast {
+    /// Whether this setting means multicast on this host now (`Auto` asks [`loopback_multicast_capable`]).
+    pub fn resolve(self) -> bool {
+        match self {
+            Multicast::Auto => loopback_multicast_capable(),
+            Multicast::On => true,
+            Multicast::Off => false,
+        }
+    }
+}
+
+/// Whether a loopback interface with an IPv4 address is up and multicast-capable in this network namespace,
+/// as `rustdds` sees interfaces (the same `netdev` enumeration), so that it joins its multicast groups on it.
+pub fn loopback_multicast_capable() -> bool {
+    netdev::get_interfaces()
+        .iter()
+        .any(|iface| iface.is_loopback() && iface.is_up() && iface.is_multicast() && !iface.ipv4.is_empty())
+}
 
 /// Settings of an [`RtpsTransport`].
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -48,6 +95,8 @@ pub struct RtpsConfig {
     pub pace_bytes: usize,
     /// Longest wait for acknowledgements when pacing, and longest blocking of a write on a full send window.
     pub max_blocking: Duration,
+    /// One multicast datagram for all same-host readers, or one unicast copy each.
+    pub multicast: Multicast,
 }
 
 impl Default for RtpsConfig {
@@ -61,6 +110,7 @@ impl Default for RtpsConfig {
             large_sample_bytes: 64 << 10,
             pace_bytes: 4 << 20,
             max_blocking: Duration::from_secs(2),
+            multicast: Multicast::Auto,
         }
     }
 }
@@ -181,12 +231,19 @@ pub struct RtpsTransport {
     local: EndpointId,
     unpaced_large_bytes: AtomicUsize,
     config: RtpsConfig,
+    multicast: bool,
     _participant: DomainParticipant,
+    /// With multicast, the readers' own participant (see [`RtpsTransport::new`]).
+    _reading_participant: Option<DomainParticipant>,
 }
 
 impl std::fmt::Debug for RtpsTransport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("RtpsTransport").field("local", &self.local).field("config", &self.config).finish()
+        f.debug_struct("RtpsTransport")
+            .field("local", &self.local)
+            .field("config", &self.config)
+            .field("multicast", &self.multicast)
+            .finish()
     }
 }
 
@@ -206,16 +263,31 @@ fn endpoint_of(guid: rustdds::GUID) -> EndpointId {
 impl RtpsTransport {
     /// Joins the DDS domain and starts the receiving thread.
     ///
+    /// With multicast ([`RtpsConfig::multicast`]) the readers live in a second participant of their own. A
+    /// `rustdds` writer also sends to the readers of its own participant, and it never learns a route to its own
+    /// participant (it does not record where its own traffic arrives), so that reader takes the fallback path,
+    /// whose sends are de-duplicated separately from the routed ones: every sample would go to the multicast group
+    /// twice. A reader in another participant is routed like any remote reader, and its multicast route is the one
+    /// datagram all readers share. Without multicast one participant holds both, as before.
+    ///
     /// # Errors
-    /// [`TransportError::Setup`] if the participant, a topic, a reader or a writer cannot be created.
+    /// [`TransportError::Setup`] if a participant, a topic, a reader or a writer cannot be created.
     pub fn new(config: RtpsConfig) -> Result<Self, TransportError> {
-        let participant = DomainParticipant::new(config.domain_id).map_err(|e| TransportError::Setup {
-            what: format!("participant in domain {}", config.domain_id),
-            detail: format!("{e:?}"),
-        })?;
+        let multicast = config.multicast.resolve();
+        let join = |role: &str| {
+            DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast).build().map_err(|e| {
+                TransportError::Setup {
+                    what: format!("{role}participant in domain {}", config.domain_id),
+                    detail: format!("{e:?}"),
+                }
+            })
+        };
+        let participant = join("")?;
+        let reading_participant = if multicast { Some(join("reading ")?) } else { None };
+        let reading = reading_participant.as_ref().unwrap_or(&participant);
         let qos = qos(&config);
         let publisher = participant.create_publisher(&qos).map_err(setup("publisher"))?;
-        let subscriber = participant.create_subscriber(&qos).map_err(setup("subscriber"))?;
+        let subscriber = reading.create_subscriber(&qos).map_err(setup("subscriber"))?;
         let mut writers = Vec::new();
         let mut readers = Vec::new();
         for channel in Channel::ALL {
@@ -223,11 +295,17 @@ impl RtpsTransport {
             let topic = participant
                 .create_topic(name.clone(), "cortex::Envelope".into(), &qos, TopicKind::NoKey)
                 .map_err(setup(format!("topic {name}")))?;
+            let reading_topic = match &reading_participant {
+                Some(reading) => reading
+                    .create_topic(name.clone(), "cortex::Envelope".into(), &qos, TopicKind::NoKey)
+                    .map_err(setup(format!("topic {name} of the reading participant")))?,
+                None => topic.clone(),
+            };
             let writer = publisher
                 .create_datawriter_no_key::<Payload, OctetsAdapter>(&topic, Some(qos.clone()))
                 .map_err(setup(format!("writer of {name}")))?;
             let reader = subscriber
-                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&topic, Some(qos.clone()))
+                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&reading_topic, Some(qos.clone()))
                 .map_err(setup(format!("reader of {name}")))?;
             writers.push(Mutex::new(writer));
             readers.push((channel, reader));
@@ -253,13 +331,20 @@ impl RtpsTransport {
             local,
             unpaced_large_bytes: AtomicUsize::new(0),
             config,
+            multicast,
             _participant: participant,
+            _reading_participant: reading_participant,
         })
     }
 
     /// The settings in force.
     pub fn config(&self) -> &RtpsConfig {
         &self.config
+    }
+
+    /// Whether this participant sends to same-host readers as multicast ([`RtpsConfig::multicast`] resolved).
+    pub fn multicast(&self) -> bool {
+        self.multicast
     }
 }
 
