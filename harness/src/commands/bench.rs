@@ -437,9 +437,14 @@ fn rtt(args: RttArgs) -> Result<()> {
             for (name, f) in [("agent (discovery + join)", &agent), ("raw rustdds (discovery)", &raw)] {
                 if let Some(s) = &f.socket {
                     println!(
-                        "{name}: {} B in {} packets before the first echo; steady state {} B in {} packets for {} \
-                         updates (pings + pongs)",
-                        s.discovery.tx_bytes, s.discovery.tx_packets, s.steady.tx_bytes, s.steady.tx_packets, s.updates
+                        "{name}: {} B in {} packets before the first echo; steady state {} B in {} packets ({} B \
+                         multicast) for {} updates (pings + pongs)",
+                        s.discovery.tx_bytes,
+                        s.discovery.tx_packets,
+                        s.steady.tx_bytes,
+                        s.steady.tx_packets,
+                        s.steady.tx_multicast_bytes,
+                        s.updates
                     );
                 }
             }
