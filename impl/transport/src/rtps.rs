@@ -51,7 +51,9 @@ pub enum Multicast {
     #[default]
     Auto,
     /// Same-host readers share one multicast datagram (`rustdds` `same_host_loopback(false)`). Discovery then
-    /// needs a multicast-capable interface, since the unicast "localhost peers" announcements are off too.
+    /// needs a multicast-capable interface, since the unicast "localhost peers" announcements are off too. Each
+    /// transport runs two participants (see [`RtpsTransport::new`]); `rustdds` allows 120 participants per domain
+    /// and host, so at most 60 such transports share a domain on one host.
     On,
     /// `rustdds`'s default: a reader confirmed to be on this host gets its own unicast copy over loopback.
     Off,
