@@ -1,8 +1,15 @@
 //! `cortex bench`: measurements of agents over RTPS on this host, as separate processes. `rtt` ping-pongs one
 //! attribute between two agent processes and, in the same run, raw byte samples between two processes over the
 //! same `rustdds` transport with no agent on top (the transport's limit); `join` times a new agent process
-//! receiving and rebuilding a graph of N nodes. The helper processes are this binary's hidden `bench echo` and
-//! `bench join-child` subcommands. Figures are measurements, never test assertions.
+//! receiving and rebuilding a graph of N nodes; `fanout` (hidden, for issues 5 and 7) sends large samples from one
+//! writer to N reader processes and counts the bytes on the wire against N, with multicast on and off. The helper
+//! processes are this binary's hidden `bench echo`, `bench join-child` and `bench fanout-reader` subcommands.
+//!
+//! `rtt` and `fanout` re-run themselves in a fresh network namespace when they can (`--netns auto`, the default:
+//! root, `unshare` and `ip` present), so the namespace's loopback counters count exactly their traffic — IP, UDP
+//! and RTPS, acknowledgements, heartbeats and discovery — read at phase boundaries (discovery, then steady
+//! state). Otherwise they print the transport's estimate only and say why. Figures are measurements, never test
+//! assertions.
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
@@ -12,10 +19,11 @@ use std::time::{Duration, Instant};
 use agent::{Agent, AgentConfig, AgentId};
 use anyhow::{Context, Result, bail};
 use bytes::Bytes;
-use clap::{Args, Subcommand};
+use clap::{Args, Subcommand, ValueEnum};
 use dsr::{Change, Element, NewNode, NodeId, Value, attrs};
 use hdrhistogram::Histogram;
-use transport::rtps::{RtpsConfig, RtpsTransport};
+use measure::netns::{self, LoopbackCounters, NetnsSetup};
+use transport::rtps::{Multicast, RtpsConfig, RtpsTransport, estimated_wire_bytes};
 use transport::{Channel, SystemClock, Transport};
 
 /// Arguments of `cortex bench`.
@@ -39,6 +47,54 @@ pub enum BenchCommand {
     /// Helper process: joins and reports the time to the graph.
     #[command(hide = true)]
     JoinChild(JoinChildArgs),
+    /// Bytes on the wire of one writer of large samples to N reader processes, multicast on and off.
+    #[command(hide = true)]
+    Fanout(FanoutArgs),
+    /// Helper process: counts the fan-out's samples and reports the count.
+    #[command(hide = true)]
+    FanoutReader(FanoutReaderArgs),
+}
+
+/// Where a measurement runs, and so how its wire bytes are counted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum NetnsMode {
+    /// In a fresh network namespace when one can be made (exact socket-level bytes), else here with estimates.
+    Auto,
+    /// In a fresh network namespace, or fail.
+    Require,
+    /// Here, with the transport's estimates only.
+    Off,
+}
+
+/// `--multicast`: the transport's [`Multicast`] setting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MulticastArg {
+    /// Multicast when the loopback interface is multicast-capable.
+    Auto,
+    /// Same-host readers share one multicast datagram.
+    On,
+    /// One unicast copy per same-host reader (rustdds's default).
+    Off,
+}
+
+impl From<MulticastArg> for Multicast {
+    fn from(arg: MulticastArg) -> Multicast {
+        match arg {
+            MulticastArg::Auto => Multicast::Auto,
+            MulticastArg::On => Multicast::On,
+            MulticastArg::Off => Multicast::Off,
+        }
+    }
+}
+
+impl MulticastArg {
+    fn name(self) -> &'static str {
+        match self {
+            MulticastArg::Auto => "auto",
+            MulticastArg::On => "on",
+            MulticastArg::Off => "off",
+        }
+    }
 }
 
 /// Arguments of `cortex bench rtt`.
@@ -56,9 +112,58 @@ pub struct RttArgs {
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
+    /// Run in a fresh network namespace to count socket-level bytes.
+    #[arg(long, value_enum, default_value_t = NetnsMode::Auto)]
+    pub netns: NetnsMode,
+    /// Multicast for same-host readers (in a namespace, `lo` is made multicast-capable unless `off`).
+    #[arg(long, value_enum, default_value_t = MulticastArg::Auto)]
+    pub multicast: MulticastArg,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Arguments of `cortex bench fanout`.
+#[derive(Debug, Args)]
+pub struct FanoutArgs {
+    /// Numbers of reader processes, one run each.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
+    pub readers: Vec<u32>,
+    /// Sample size in bytes (default: a 752x480 mono8 frame).
+    #[arg(long, default_value_t = 360_960)]
+    pub payload: usize,
+    /// Samples per second.
+    #[arg(long, default_value_t = 20.0)]
+    pub rate: f64,
+    /// Samples per run.
+    #[arg(long, default_value_t = 60)]
+    pub frames: u32,
+    /// Multicast settings to compare, one run per setting and reader count.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "on,off")]
+    pub multicast: Vec<MulticastArg>,
+    /// DDS domain id.
+    #[arg(long, default_value_t = 0)]
+    pub domain: u16,
+    /// Run in a fresh network namespace (with multicast on `lo`) to count socket-level bytes.
+    #[arg(long, value_enum, default_value_t = NetnsMode::Auto)]
+    pub netns: NetnsMode,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of the fan-out reader helper.
+#[derive(Debug, Args)]
+pub struct FanoutReaderArgs {
+    /// DDS domain id.
+    #[arg(long)]
+    pub domain: u16,
+    /// Topic prefix.
+    #[arg(long)]
+    pub prefix: String,
+    /// Multicast setting.
+    #[arg(long, value_enum)]
+    pub multicast: MulticastArg,
 }
 
 /// Arguments of `cortex bench join`.
@@ -87,6 +192,9 @@ pub struct EchoArgs {
     /// Echo raw samples instead of running an agent.
     #[arg(long)]
     pub raw: bool,
+    /// Multicast setting.
+    #[arg(long, value_enum, default_value_t = MulticastArg::Auto)]
+    pub multicast: MulticastArg,
 }
 
 /// Arguments of the join helper.
@@ -110,16 +218,65 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Join(args) => join(args),
         BenchCommand::Echo(args) => echo(args),
         BenchCommand::JoinChild(args) => join_child(args),
+        BenchCommand::Fanout(args) => fanout(args),
+        BenchCommand::FanoutReader(args) => fanout_reader(args),
     }
+}
+
+/// Where this measurement counts bytes.
+enum Counting {
+    /// This process runs in a fresh network namespace: its loopback counters are the measurement's traffic.
+    Socket,
+    /// Estimates only, and why.
+    EstimateOnly(String),
+}
+
+/// Either runs this command again in a fresh network namespace and returns `None` (the child did the work), or
+/// says how this process counts bytes.
+fn enter_netns(mode: NetnsMode, setup: NetnsSetup) -> Result<Option<Counting>> {
+    if netns::inside().is_some() {
+        return Ok(Some(Counting::Socket));
+    }
+    if mode == NetnsMode::Off {
+        return Ok(Some(Counting::EstimateOnly("--netns off".into())));
+    }
+    match netns::reexec_in_fresh_netns(setup) {
+        Ok(status) if status.success() => Ok(None),
+        Ok(status) => bail!("the measurement in a fresh network namespace failed ({status})"),
+        Err(error) if mode == NetnsMode::Require => {
+            Err(error).context("--netns require: cannot run in a fresh network namespace")
+        }
+        Err(error) => {
+            eprintln!("note: no fresh network namespace ({error}); socket-level bytes not measured, estimates only");
+            Ok(Some(Counting::EstimateOnly(error.to_string())))
+        }
+    }
+}
+
+/// The loopback counters now, when this process counts socket-level bytes.
+fn counters(counting: &Counting) -> Result<Option<LoopbackCounters>> {
+    match counting {
+        Counting::Socket => Ok(Some(LoopbackCounters::read()?)),
+        Counting::EstimateOnly(_) => Ok(None),
+    }
+}
+
+fn growth(later: Option<LoopbackCounters>, earlier: Option<LoopbackCounters>) -> Option<LoopbackCounters> {
+    Some(later?.since(&earlier?))
 }
 
 const WARMUP: u32 = 100;
 const PING: &str = "bench_ping";
 const PONG: &str = "bench_pong";
 
-fn rtps(domain: u16, prefix: &str) -> Result<RtpsTransport> {
-    RtpsTransport::new(RtpsConfig { domain_id: domain, topic_prefix: prefix.into(), ..RtpsConfig::default() })
-        .context("joining the DDS domain")
+fn rtps(domain: u16, prefix: &str, multicast: MulticastArg) -> Result<RtpsTransport> {
+    RtpsTransport::new(RtpsConfig {
+        domain_id: domain,
+        topic_prefix: prefix.into(),
+        multicast: multicast.into(),
+        ..RtpsConfig::default()
+    })
+    .context("joining the DDS domain")
 }
 
 /// A helper process of this binary, killed when dropped.
@@ -146,6 +303,31 @@ impl Drop for Helper {
     }
 }
 
+/// Socket-level bytes of one measurement, from the namespace's loopback counters.
+#[derive(Debug, serde::Serialize)]
+struct SocketFigures {
+    /// Discovery (and, for agents, the join) until the first echo came back.
+    discovery: LoopbackCounters,
+    /// The measured loop: every update both ways, their acknowledgements and heartbeats, periodic discovery.
+    steady: LoopbackCounters,
+    /// Updates in the steady state (pings sent plus pongs received).
+    updates: u64,
+    bytes_per_update: f64,
+    packets_per_update: f64,
+}
+
+impl SocketFigures {
+    fn new(discovery: LoopbackCounters, steady: LoopbackCounters, updates: u64) -> SocketFigures {
+        SocketFigures {
+            discovery,
+            steady,
+            updates,
+            bytes_per_update: steady.tx_bytes as f64 / updates.max(1) as f64,
+            packets_per_update: steady.tx_packets as f64 / updates.max(1) as f64,
+        }
+    }
+}
+
 /// Figures of one ping-pong run.
 #[derive(Debug, serde::Serialize)]
 struct RttFigures {
@@ -157,19 +339,41 @@ struct RttFigures {
     max_us: u64,
     envelope_bytes_per_update: f64,
     wire_bytes_per_update: f64,
+    /// Socket-level bytes, when measured in a fresh network namespace.
+    socket: Option<SocketFigures>,
 }
 
-fn figures(histogram: &Histogram<u64>, lost: u64, payload: u64, wire: u64, updates: u64) -> RttFigures {
+/// What one ping-pong loop observed, beside its histogram.
+struct LoopCounts {
+    pings: u64,
+    pongs: u64,
+    lost: u64,
+    payload_bytes: u64,
+    estimated_wire_bytes: u64,
+}
+
+fn figures(histogram: &Histogram<u64>, counts: &LoopCounts, socket: Option<SocketFigures>) -> RttFigures {
     RttFigures {
         count: histogram.len(),
-        lost,
+        lost: counts.lost,
         p50_us: histogram.value_at_quantile(0.5),
         p90_us: histogram.value_at_quantile(0.9),
         p99_us: histogram.value_at_quantile(0.99),
         max_us: histogram.max(),
-        envelope_bytes_per_update: payload as f64 / updates.max(1) as f64,
-        wire_bytes_per_update: wire as f64 / updates.max(1) as f64,
+        envelope_bytes_per_update: counts.payload_bytes as f64 / counts.pings.max(1) as f64,
+        wire_bytes_per_update: counts.estimated_wire_bytes as f64 / counts.pings.max(1) as f64,
+        socket,
     }
+}
+
+/// Socket figures from the counters at the start, after discovery, and after the steady state.
+fn socket_figures(
+    start: Option<LoopbackCounters>,
+    discovered: Option<LoopbackCounters>,
+    end: Option<LoopbackCounters>,
+    updates: u64,
+) -> Option<SocketFigures> {
+    Some(SocketFigures::new(growth(discovered, start)?, growth(end, discovered)?, updates))
 }
 
 fn payload_of(seq: u64, size: usize) -> Bytes {
@@ -186,36 +390,78 @@ fn rtt(args: RttArgs) -> Result<()> {
     if args.rate <= 0.0 || args.count == 0 {
         bail!("--rate and --count must be positive");
     }
+    let setup = NetnsSetup { multicast: args.multicast != MulticastArg::Off };
+    let Some(counting) = enter_netns(args.netns, setup)? else { return Ok(()) };
     let period = Duration::from_secs_f64(1.0 / args.rate);
-    let raw = rtt_raw(&args, period).context("raw rustdds ping-pong")?;
-    let agent = rtt_agent(&args, period).context("agent ping-pong")?;
+    let raw = rtt_raw(&args, period, &counting).context("raw rustdds ping-pong")?;
+    let agent = rtt_agent(&args, period, &counting).context("agent ping-pong")?;
     let ratio = agent.p50_us as f64 / raw.p50_us.max(1) as f64;
+    let multicast = Multicast::from(args.multicast).resolve();
     if args.json {
         let out = serde_json::json!({
             "payload": args.payload, "rate_hz": args.rate, "count": args.count,
+            "multicast": multicast, "netns": netns::inside().is_some(),
             "agent": agent, "raw_rustdds": raw, "p50_ratio": ratio,
         });
         println!("{out}");
-    } else {
-        println!("RTT, {} B payload, {} Hz, {} pings, two processes on loopback", args.payload, args.rate, args.count);
+        return Ok(());
+    }
+    let place = match &counting {
+        Counting::Socket => "in a fresh network namespace",
+        Counting::EstimateOnly(_) => "on this host's loopback",
+    };
+    println!(
+        "RTT, {} B payload, {} Hz, {} pings, two processes {place}, multicast {}",
+        args.payload,
+        args.rate,
+        args.count,
+        if multicast { "on" } else { "off" }
+    );
+    println!(
+        "{:<12} {:>8} {:>8} {:>8} {:>8} {:>6} {:>14} {:>14} {:>14} {:>10}",
+        "", "p50 us", "p90 us", "p99 us", "max us", "lost", "envelope B/upd", "est. wire B", "socket B/upd", "pkts/upd"
+    );
+    for (name, f) in [("agent", &agent), ("raw rustdds", &raw)] {
+        let (socket_bytes, packets) = match &f.socket {
+            Some(s) => (format!("{:.1}", s.bytes_per_update), format!("{:.2}", s.packets_per_update)),
+            None => ("-".into(), "-".into()),
+        };
         println!(
-            "{:<12} {:>8} {:>8} {:>8} {:>8} {:>6} {:>14} {:>14}",
-            "", "p50 us", "p90 us", "p99 us", "max us", "lost", "envelope B/upd", "wire B/upd"
+            "{name:<12} {:>8} {:>8} {:>8} {:>8} {:>6} {:>14.1} {:>14.1} {socket_bytes:>14} {packets:>10}",
+            f.p50_us, f.p90_us, f.p99_us, f.max_us, f.lost, f.envelope_bytes_per_update, f.wire_bytes_per_update
         );
-        for (name, f) in [("agent", &agent), ("raw rustdds", &raw)] {
+    }
+    println!("agent p50 / raw p50 = {ratio:.2}");
+    match &counting {
+        Counting::Socket => {
+            for (name, f) in [("agent (discovery + join)", &agent), ("raw rustdds (discovery)", &raw)] {
+                if let Some(s) = &f.socket {
+                    println!(
+                        "{name}: {} B in {} packets before the first echo; steady state {} B in {} packets ({} B \
+                         multicast) for {} updates (pings + pongs)",
+                        s.discovery.tx_bytes,
+                        s.discovery.tx_packets,
+                        s.steady.tx_bytes,
+                        s.steady.tx_packets,
+                        s.steady.tx_multicast_bytes,
+                        s.updates
+                    );
+                }
+            }
             println!(
-                "{name:<12} {:>8} {:>8} {:>8} {:>8} {:>6} {:>14.1} {:>14.1}",
-                f.p50_us, f.p90_us, f.p99_us, f.max_us, f.lost, f.envelope_bytes_per_update, f.wire_bytes_per_update
+                "socket B/upd: loopback tx bytes (IPv4 + UDP + RTPS, acknowledgements, heartbeats, periodic discovery) \
+                 in the steady state / updates both ways; est. wire B: the transport's estimate for one sample"
             );
         }
-        println!("agent p50 / raw p50 = {ratio:.2}");
+        Counting::EstimateOnly(why) => println!("socket-level bytes not measured ({why}); est. wire B is an estimate"),
     }
     Ok(())
 }
 
-fn rtt_raw(args: &RttArgs, period: Duration) -> Result<RttFigures> {
+fn rtt_raw(args: &RttArgs, period: Duration, counting: &Counting) -> Result<RttFigures> {
     let prefix = format!("rawrtt{}", std::process::id());
-    let transport = rtps(args.domain, &prefix)?;
+    let start = counters(counting)?;
+    let transport = rtps(args.domain, &prefix, args.multicast)?;
     let _helper = Helper::spawn(&[
         "bench".into(),
         "echo".into(),
@@ -224,6 +470,8 @@ fn rtt_raw(args: &RttArgs, period: Duration) -> Result<RttFigures> {
         "--prefix".into(),
         prefix,
         "--raw".into(),
+        "--multicast".into(),
+        args.multicast.name().into(),
     ])?;
     // Discovery: probe until an echo comes back.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -237,13 +485,15 @@ fn rtt_raw(args: &RttArgs, period: Duration) -> Result<RttFigures> {
         }
     }
     while transport.recv_timeout(Duration::from_millis(200)).is_some() {}
+    let discovered = counters(counting)?;
     let mut histogram = Histogram::<u64>::new(3)?;
-    let mut lost = 0;
+    let mut counts = LoopCounts { pings: 0, pongs: 0, lost: 0, payload_bytes: 0, estimated_wire_bytes: 0 };
     let before = transport.stats();
     let mut next = Instant::now();
     for seq in 0..u64::from(WARMUP + args.count) {
         let sent = Instant::now();
         transport.publish(Channel::Updates, payload_of(seq, args.payload))?;
+        counts.pings += 1;
         let reply_deadline = sent + Duration::from_secs(1);
         let mut got = false;
         while let Some(sample) = transport.recv_timeout(reply_deadline.saturating_duration_since(Instant::now())) {
@@ -252,25 +502,23 @@ fn rtt_raw(args: &RttArgs, period: Duration) -> Result<RttFigures> {
                 break;
             }
         }
+        counts.pongs += u64::from(got);
         if seq >= u64::from(WARMUP) {
             if got {
                 histogram.record(sent.elapsed().as_micros() as u64)?;
             } else {
-                lost += 1;
+                counts.lost += 1;
             }
         }
         next += period;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
+    let end = counters(counting)?;
     let after = transport.stats();
-    let updates = u64::from(WARMUP + args.count);
-    Ok(figures(
-        &histogram,
-        lost,
-        after.payload_bytes_sent - before.payload_bytes_sent,
-        after.wire_bytes_sent - before.wire_bytes_sent,
-        updates,
-    ))
+    counts.payload_bytes = after.payload_bytes_sent - before.payload_bytes_sent;
+    counts.estimated_wire_bytes = after.wire_bytes_sent - before.wire_bytes_sent;
+    let socket = socket_figures(start, discovered, end, counts.pings + counts.pongs);
+    Ok(figures(&histogram, &counts, socket))
 }
 
 fn bench_config(id: u32, join_wait: Duration) -> AgentConfig {
@@ -279,10 +527,14 @@ fn bench_config(id: u32, join_wait: Duration) -> AgentConfig {
     config
 }
 
-fn rtt_agent(args: &RttArgs, period: Duration) -> Result<RttFigures> {
+fn rtt_agent(args: &RttArgs, period: Duration, counting: &Counting) -> Result<RttFigures> {
     let prefix = format!("agentrtt{}", std::process::id());
-    let agent =
-        Agent::start(bench_config(1, Duration::from_millis(300)), rtps(args.domain, &prefix)?, Arc::new(SystemClock))?;
+    let start = counters(counting)?;
+    let agent = Agent::start(
+        bench_config(1, Duration::from_millis(300)),
+        rtps(args.domain, &prefix, args.multicast)?,
+        Arc::new(SystemClock),
+    )?;
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the pinging agent did not start");
     }
@@ -296,6 +548,8 @@ fn rtt_agent(args: &RttArgs, period: Duration) -> Result<RttFigures> {
         args.domain.to_string(),
         "--prefix".into(),
         prefix,
+        "--multicast".into(),
+        args.multicast.name().into(),
     ])?;
     // The echo agent joins, then echoes; wait for the echo of a probe.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -313,13 +567,15 @@ fn rtt_agent(args: &RttArgs, period: Duration) -> Result<RttFigures> {
     }
     std::thread::sleep(Duration::from_millis(200));
     while signals.try_recv().is_ok() {}
+    let discovered = counters(counting)?;
     let mut histogram = Histogram::<u64>::new(3)?;
-    let mut lost = 0;
+    let mut counts = LoopCounts { pings: 0, pongs: 0, lost: 0, payload_bytes: 0, estimated_wire_bytes: 0 };
     let before = agent.status().transport;
     let mut next = Instant::now();
     for seq in 0..u64::from(WARMUP + args.count) {
         let sent = Instant::now();
         agent.set_attr(ping, attrs::CAM_RGB, payload_of(seq, args.payload))?;
+        counts.pings += 1;
         let reply_deadline = sent + Duration::from_secs(1);
         let mut got = false;
         while let Ok(signal) = signals.recv_deadline(reply_deadline) {
@@ -328,25 +584,23 @@ fn rtt_agent(args: &RttArgs, period: Duration) -> Result<RttFigures> {
                 break;
             }
         }
+        counts.pongs += u64::from(got);
         if seq >= u64::from(WARMUP) {
             if got {
                 histogram.record(sent.elapsed().as_micros() as u64)?;
             } else {
-                lost += 1;
+                counts.lost += 1;
             }
         }
         next += period;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
+    let end = counters(counting)?;
     let after = agent.status().transport;
-    let updates = u64::from(WARMUP + args.count);
-    Ok(figures(
-        &histogram,
-        lost,
-        after.payload_bytes_sent - before.payload_bytes_sent,
-        after.wire_bytes_sent - before.wire_bytes_sent,
-        updates,
-    ))
+    counts.payload_bytes = after.payload_bytes_sent - before.payload_bytes_sent;
+    counts.estimated_wire_bytes = after.wire_bytes_sent - before.wire_bytes_sent;
+    let socket = socket_figures(start, discovered, end, counts.pings + counts.pongs);
+    Ok(figures(&histogram, &counts, socket))
 }
 
 fn is_pong(change: &Change, pong: NodeId) -> bool {
@@ -354,7 +608,7 @@ fn is_pong(change: &Change, pong: NodeId) -> bool {
 }
 
 fn echo(args: EchoArgs) -> Result<()> {
-    let transport = rtps(args.domain, &args.prefix)?;
+    let transport = rtps(args.domain, &args.prefix, args.multicast)?;
     if args.raw {
         loop {
             if let Some(sample) = transport.recv_timeout(Duration::from_secs(60)) {
@@ -415,8 +669,11 @@ fn build_tree<T: Transport>(agent: &Agent<T>, nodes: u32) -> Result<()> {
 
 fn join(args: JoinArgs) -> Result<()> {
     let prefix = format!("join{}", std::process::id());
-    let agent =
-        Agent::start(bench_config(1, Duration::from_millis(300)), rtps(args.domain, &prefix)?, Arc::new(SystemClock))?;
+    let agent = Agent::start(
+        bench_config(1, Duration::from_millis(300)),
+        rtps(args.domain, &prefix, MulticastArg::Auto)?,
+        Arc::new(SystemClock),
+    )?;
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the first agent did not start");
     }
@@ -466,7 +723,7 @@ fn join(args: JoinArgs) -> Result<()> {
 
 fn join_child(args: JoinChildArgs) -> Result<()> {
     let started = Instant::now();
-    let transport = rtps(args.domain, &args.prefix)?;
+    let transport = rtps(args.domain, &args.prefix, MulticastArg::Auto)?;
     let agent = Agent::start(bench_config(2, Duration::from_secs(60)), transport, Arc::new(SystemClock))?;
     if !agent.wait_ready(Duration::from_secs(60)) {
         bail!("no graph within 60 s");
@@ -475,4 +732,299 @@ fn join_child(args: JoinChildArgs) -> Result<()> {
     let nodes = agent.status().nodes;
     println!("{}", serde_json::json!({ "ready_ms": ready_ms, "nodes": nodes, "complete": nodes == args.nodes }));
     Ok(())
+}
+
+/// Figures of one fan-out run: one writer, `readers` reader processes.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct FanoutFigures {
+    readers: u32,
+    /// The multicast setting asked for, and whether the writer's participant uses multicast.
+    multicast_setting: String,
+    multicast: bool,
+    frames: u32,
+    payload_bytes: usize,
+    /// Fewest frames any reader received.
+    delivered_min: u64,
+    /// The transport's estimate for one copy of one frame.
+    estimated_wire_bytes_per_frame: usize,
+    /// Discovery of every reader, until each answered a probe.
+    discovery: Option<LoopbackCounters>,
+    /// From the first frame until every reader reported its count.
+    steady: Option<LoopbackCounters>,
+    /// Steady-state loopback tx bytes per frame sent, and that over the payload (≈ copies on the wire).
+    bytes_per_frame: Option<f64>,
+    copies_per_frame: Option<f64>,
+    /// `bytes_per_frame` times the frame rate.
+    megabytes_per_second: Option<f64>,
+}
+
+const PROBE: &[u8] = b"fanout-probe";
+const READY: &[u8] = b"fanout-ready";
+const DONE: &[u8] = b"fanout-done";
+
+fn fanout(args: FanoutArgs) -> Result<()> {
+    if args.rate <= 0.0 || args.frames == 0 || args.readers.is_empty() || args.readers.contains(&0) {
+        bail!("--rate, --frames and every --readers count must be positive");
+    }
+    if args.payload < 8 {
+        bail!("--payload must be at least 8 bytes (a sequence number)");
+    }
+    if args.readers.iter().any(|&n| n > 32) {
+        bail!("--readers: at most 32 reader processes");
+    }
+    let (runs, counting) = if netns::inside().is_some() {
+        (fanout_runs(&args, &Counting::Socket)?, Counting::Socket)
+    } else if args.netns == NetnsMode::Off {
+        let counting = Counting::EstimateOnly("--netns off".into());
+        (fanout_runs(&args, &counting)?, counting)
+    } else {
+        match netns::probe(NetnsSetup { multicast: true }) {
+            Ok(()) => (fanout_in_namespaces(&args)?, Counting::Socket),
+            Err(error) if args.netns == NetnsMode::Require => {
+                return Err(error).context("--netns require: cannot run in a fresh network namespace");
+            }
+            Err(error) => {
+                eprintln!("note: no fresh network namespace ({error}); socket-level bytes not measured");
+                let counting = Counting::EstimateOnly(error.to_string());
+                (fanout_runs(&args, &counting)?, counting)
+            }
+        }
+    };
+    if args.json {
+        let out = serde_json::json!({
+            "payload": args.payload, "rate_hz": args.rate, "frames": args.frames,
+            "netns": matches!(counting, Counting::Socket), "runs": runs,
+        });
+        println!("{out}");
+        return Ok(());
+    }
+    for (index, run) in runs.iter().enumerate() {
+        print_fanout_row(run, index == 0, args.rate, &counting);
+    }
+    match &counting {
+        Counting::EstimateOnly(why) => println!("socket-level bytes not measured ({why})"),
+        Counting::Socket => println!(
+            "bytes: loopback tx (IPv4 + UDP + RTPS, acknowledgements, heartbeats) from the first frame until every \
+             reader reported its count, per frame sent; copies = bytes per frame / payload; mcast = share of those \
+             bytes sent to a multicast group. Each multicast setting ran in its own namespace (`lo` multicast-capable \
+             unless `off`)."
+        ),
+    }
+    Ok(())
+}
+
+/// Every run of `args` in this process.
+fn fanout_runs(args: &FanoutArgs, counting: &Counting) -> Result<Vec<FanoutFigures>> {
+    let mut runs = Vec::new();
+    for &setting in &args.multicast {
+        // Outside a namespace of our own, multicast on a host whose loopback cannot carry it would leave through
+        // the other multicast-capable interfaces: not for a benchmark's traffic.
+        if setting == MulticastArg::On
+            && matches!(counting, Counting::EstimateOnly(_))
+            && !transport::rtps::loopback_multicast_capable()
+        {
+            eprintln!("note: skipping --multicast on: this host's loopback is not multicast-capable");
+            continue;
+        }
+        for &readers in &args.readers {
+            runs.push(
+                fanout_once(args, readers, setting, counting)
+                    .with_context(|| format!("fan-out to {readers} readers, multicast {}", setting.name()))?,
+            );
+        }
+    }
+    Ok(runs)
+}
+
+/// Every run of `args`, one fresh network namespace per multicast setting (`lo` multicast-capable unless `off`,
+/// as on a host whose loopback has no multicast), each a child process of this binary reporting JSON.
+fn fanout_in_namespaces(args: &FanoutArgs) -> Result<Vec<FanoutFigures>> {
+    let mut runs = Vec::new();
+    for &setting in &args.multicast {
+        let readers: Vec<String> = args.readers.iter().map(u32::to_string).collect();
+        let child_args: Vec<std::ffi::OsString> = [
+            "bench",
+            "fanout",
+            "--json",
+            "--netns",
+            "require",
+            "--multicast",
+            setting.name(),
+            "--readers",
+            &readers.join(","),
+            "--payload",
+            &args.payload.to_string(),
+            "--rate",
+            &args.rate.to_string(),
+            "--frames",
+            &args.frames.to_string(),
+            "--domain",
+            &args.domain.to_string(),
+        ]
+        .iter()
+        .map(Into::into)
+        .collect();
+        let output =
+            netns::this_executable_in_fresh_netns(NetnsSetup { multicast: setting != MulticastArg::Off }, &child_args)?
+                .stdin(Stdio::null())
+                .stderr(Stdio::inherit())
+                .output()
+                .context("starting the fan-out in a fresh network namespace")?;
+        if !output.status.success() {
+            bail!("the fan-out with multicast {} failed in its namespace ({})", setting.name(), output.status);
+        }
+        let report: serde_json::Value =
+            serde_json::from_slice(&output.stdout).context("the fan-out's report from its namespace")?;
+        let child_runs: Vec<FanoutFigures> =
+            serde_json::from_value(report["runs"].clone()).context("the fan-out's runs from its namespace")?;
+        runs.extend(child_runs);
+    }
+    Ok(runs)
+}
+
+fn print_fanout_row(run: &FanoutFigures, header: bool, rate: f64, counting: &Counting) {
+    if header {
+        let place = match counting {
+            Counting::Socket => "in a fresh network namespace",
+            Counting::EstimateOnly(_) => "on this host's loopback",
+        };
+        println!(
+            "fan-out: one writer of {} B samples at {rate} Hz, {} samples, to N reader processes {place}",
+            run.payload_bytes, run.frames
+        );
+        println!(
+            "{:>9} {:>3} {:>10} {:>12} {:>14} {:>8} {:>7} {:>9} {:>12}",
+            "multicast", "N", "delivered", "discovery B", "bytes/frame", "copies", "mcast", "MB/s", "est. B/frame"
+        );
+    }
+    let fmt = |v: Option<f64>, digits: usize| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"));
+    let mcast_share = run.steady.map(|s| s.tx_multicast_bytes as f64 / s.tx_bytes.max(1) as f64 * 100.0);
+    println!(
+        "{:>9} {:>3} {:>10} {:>12} {:>14} {:>8} {:>7} {:>9} {:>12}",
+        format!("{}{}", run.multicast_setting, if run.multicast { "" } else { "*" }),
+        run.readers,
+        format!("{}/{}", run.delivered_min, run.frames),
+        run.discovery.map_or_else(|| "-".to_owned(), |d| d.tx_bytes.to_string()),
+        fmt(run.bytes_per_frame, 0),
+        fmt(run.copies_per_frame, 2),
+        mcast_share.map_or_else(|| "-".to_owned(), |v| format!("{v:.0}%")),
+        fmt(run.megabytes_per_second, 2),
+        run.estimated_wire_bytes_per_frame,
+    );
+}
+
+fn fanout_once(args: &FanoutArgs, readers: u32, setting: MulticastArg, counting: &Counting) -> Result<FanoutFigures> {
+    let prefix = format!("fanout{}m{}n{readers}", std::process::id(), setting.name());
+    let start = counters(counting)?;
+    let transport = rtps(args.domain, &prefix, setting)?;
+    let mut helpers = Vec::new();
+    for _ in 0..readers {
+        helpers.push(Helper::spawn(&[
+            "bench".into(),
+            "fanout-reader".into(),
+            "--domain".into(),
+            args.domain.to_string(),
+            "--prefix".into(),
+            prefix.clone(),
+            "--multicast".into(),
+            setting.name().into(),
+        ])?);
+    }
+    // Discovery: probe until every reader has answered one (its reader matched ours and ours matched its writer).
+    let mut ready = std::collections::BTreeSet::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while ready.len() < readers as usize {
+        if Instant::now() > deadline {
+            bail!("{} of {readers} readers answered within 60 s", ready.len());
+        }
+        transport.publish(Channel::Calls, Bytes::from_static(PROBE))?;
+        let until = Instant::now() + Duration::from_millis(100);
+        while let Some(sample) = transport.recv_timeout(until.saturating_duration_since(Instant::now())) {
+            if &sample.bytes[..] == READY {
+                ready.insert(sample.origin);
+            }
+        }
+    }
+    // Every reader answered: the probes still in flight reach matched readers only; let them settle.
+    while transport.recv_timeout(Duration::from_millis(300)).is_some() {}
+    let discovered = counters(counting)?;
+    let period = Duration::from_secs_f64(1.0 / args.rate);
+    let mut next = Instant::now();
+    for seq in 0..u64::from(args.frames) {
+        transport.publish(Channel::Updates, payload_of(seq, args.payload))?;
+        next += period;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+    let mut done = Vec::with_capacity(DONE.len() + 8);
+    done.extend_from_slice(DONE);
+    done.extend_from_slice(&u64::from(args.frames).to_le_bytes());
+    transport.publish(Channel::Calls, Bytes::from(done))?;
+    let mut counts = std::collections::BTreeMap::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while counts.len() < readers as usize {
+        if Instant::now() > deadline {
+            bail!("{} of {readers} readers reported their counts within 60 s", counts.len());
+        }
+        if let Some(sample) = transport.recv_timeout(Duration::from_millis(100))
+            && sample.channel == Channel::Calls
+            && let Some(count) = sample.bytes.strip_prefix(DONE).and_then(seq_of)
+        {
+            counts.insert(sample.origin, count);
+        }
+    }
+    let end = counters(counting)?;
+    drop(helpers);
+    let steady = growth(end, discovered);
+    let bytes_per_frame = steady.map(|s| s.tx_bytes as f64 / f64::from(args.frames));
+    Ok(FanoutFigures {
+        readers,
+        multicast_setting: setting.name().into(),
+        multicast: transport.multicast(),
+        frames: args.frames,
+        payload_bytes: args.payload,
+        delivered_min: counts.values().copied().min().unwrap_or(0),
+        estimated_wire_bytes_per_frame: estimated_wire_bytes(args.payload),
+        discovery: growth(discovered, start),
+        steady,
+        bytes_per_frame,
+        copies_per_frame: bytes_per_frame.map(|b| b / args.payload as f64),
+        megabytes_per_second: bytes_per_frame.map(|b| b * args.rate / 1e6),
+    })
+}
+
+/// The fan-out reader: answers probes, counts frames, and reports the count when told the run is done and it has
+/// them all (or 10 s later). Exits when the writer has been silent for 60 s.
+fn fanout_reader(args: FanoutReaderArgs) -> Result<()> {
+    let transport = rtps(args.domain, &args.prefix, args.multicast)?;
+    let mut frames = 0u64;
+    let mut expected: Option<(u64, Instant)> = None;
+    let mut last_heard = Instant::now();
+    loop {
+        if let Some(sample) = transport.recv_timeout(Duration::from_millis(50)) {
+            last_heard = Instant::now();
+            match sample.channel {
+                Channel::Updates => frames += 1,
+                Channel::Calls if &sample.bytes[..] == PROBE => {
+                    transport.publish(Channel::Calls, Bytes::from_static(READY))?;
+                }
+                Channel::Calls => {
+                    if let Some(total) = sample.bytes.strip_prefix(DONE).and_then(seq_of) {
+                        expected = Some((total, Instant::now()));
+                    }
+                }
+                Channel::Sync => {}
+            }
+        } else if last_heard.elapsed() > Duration::from_secs(60) {
+            return Ok(());
+        }
+        if let Some((total, since)) = expected
+            && (frames >= total || since.elapsed() > Duration::from_secs(10))
+        {
+            let mut report = Vec::with_capacity(DONE.len() + 8);
+            report.extend_from_slice(DONE);
+            report.extend_from_slice(&frames.to_le_bytes());
+            transport.publish(Channel::Calls, Bytes::from(report))?;
+            expected = None;
+        }
+    }
 }

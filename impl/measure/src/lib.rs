@@ -21,6 +21,8 @@
 //!   BICA runtime and clock, under an overload injected by another component of the same scheduler.
 //! - [`experiment`] — experiment files (TOML) and the runner of a set of experiments.
 //! - [`figures`] — line charts as SVG and PNG with an embedded font (no system font libraries).
+//! - [`netns`] — exact wire bytes: re-run a measurement in a fresh network namespace and read its loopback
+//!   counters ([`netns::LoopbackCounters`]) at phase boundaries; says why when a namespace cannot be made.
 //! - [`provenance`] — commit, rustc, machine (cores, memory, CPU model from `/proc`), dataset checksums.
 //!
 //! - [`roles`] — detector roles in `cortex agent` processes during a replay over RTPS: their BICA statistics
@@ -35,6 +37,7 @@ pub mod clock;
 pub mod experiment;
 pub mod figures;
 pub mod latency;
+pub mod netns;
 pub mod partition;
 pub mod process;
 pub mod provenance;

@@ -402,11 +402,12 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
     let _ = writeln!(
         md,
         "Bytes per second of the publishing span, from the transports' counters (`TransportStats`). The OS-level \
-         cross-check is the growth of the loopback interface's transmitted bytes (`/sys/class/net/lo/statistics/\
-         tx_bytes`) from the first write until every receiver has everything: near zero for the in-process bus, which \
-         does not use the network (other processes on the machine add to it); for RTPS it includes \
-         acknowledgements, heartbeats and discovery, while the transport's own count is an estimate of data \
-         submessages and headers.\n"
+         cross-check is the growth of the loopback interface's transmitted bytes (`/proc/self/net/dev`, the \
+         loopback of the report's network namespace) from the first write until every receiver has everything: near \
+         zero for the in-process bus, which does not use the network (other processes on the machine add to it); \
+         for RTPS it includes acknowledgements, heartbeats and discovery, while the transport's own count is an \
+         estimate of data submessages and headers. Exact figures against the number of reader processes, with \
+         multicast on and off, come from `cortex bench fanout` in fresh network namespaces.\n"
     );
     let _ = writeln!(
         md,

@@ -110,8 +110,9 @@ pub struct Bandwidth {
     /// Bytes received by all receivers together, per second of the publishing span.
     pub received_bytes_per_second: f64,
     /// Growth of the loopback interface's transmitted bytes from the first publication until every receiver has
-    /// everything (`/sys/class/net/lo`), if readable: the OS-level cross-check. Near zero for the in-process bus
-    /// (other processes add to it); for RTPS it includes acknowledgements, heartbeats and discovery.
+    /// everything (`lo` of this network namespace, from `/proc/self/net/dev`), if readable: the OS-level
+    /// cross-check. Near zero for the in-process bus (other processes add to it); for RTPS it includes
+    /// acknowledgements, heartbeats and discovery.
     pub loopback_tx_bytes: Option<u64>,
     /// `loopback_tx_bytes` per second of the publishing span.
     pub loopback_tx_bytes_per_second: Option<f64>,
@@ -241,9 +242,11 @@ pub fn process_cpu_ns() -> Option<u64> {
     Some(ns(usage.ru_utime) + ns(usage.ru_stime))
 }
 
-/// Transmitted bytes of the loopback interface (Linux).
+/// Transmitted bytes of the loopback interface of this process's network namespace (Linux; see
+/// [`crate::netns::LoopbackCounters`], which reads `/proc/self/net/dev` because `/sys/class/net` shows the
+/// namespace that mounted `/sys`).
 pub fn loopback_tx_bytes() -> Option<u64> {
-    std::fs::read_to_string("/sys/class/net/lo/statistics/tx_bytes").ok()?.trim().parse().ok()
+    crate::netns::LoopbackCounters::read().ok().map(|counters| counters.tx_bytes)
 }
 
 /// Peak resident memory of this process in bytes (`VmHWM` in `/proc/self/status`).

@@ -27,9 +27,21 @@
 //! configurable so several graphs can share a host; discovery uses the standard unicast locators and works on
 //! loopback without network configuration.
 //!
+//! **Multicast** ([`RtpsConfig::multicast`]). A `rustdds` writer sends a sample meant for every matched reader
+//! with "multicast preferred": one datagram per distinct route, and a reader's route is its advertised multicast
+//! locator (239.255.0.1, user-traffic port) on the interface its traffic was seen on — *unless* the reader is
+//! confirmed to be on this host and the participant prefers loopback for same-host peers (`rustdds`'s
+//! `same_host_loopback`, on by default), in which case every reader gets its own unicast copy over loopback.
+//! [`Multicast::On`] turns that preference off, so same-host readers share one multicast datagram; it needs a
+//! multicast-capable interface for discovery (on one host: `ip link set lo multicast on` and a 224.0.0.0/4 route
+//! on `lo`). [`Multicast::Auto`], the default, does so exactly when the loopback interface is up and
+//! multicast-capable ([`loopback_multicast_capable`]).
+//!
 //! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B), the RTPS DATA and
 //! INFO_TS submessages (36 B), and one RTPS header plus UDP/IPv4 header (48 B) per datagram of up to 64 KiB;
-//! acknowledgements and heartbeats are not seen by this layer.
+//! acknowledgements and heartbeats are not seen by this layer, and the estimate counts one copy per sample
+//! whatever the number of readers. Exact socket-level figures come from a measurement in a fresh network
+//! namespace (`measure::netns`, `cortex bench rtt|fanout`).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -40,9 +52,46 @@ use bytes::Bytes;
 use crossbeam_channel::{Receiver, SendTimeoutError, Sender, bounded};
 use rustdds::no_key::{DataWriter, Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter, SimpleDataReader};
 use rustdds::policy::{Durability, History, Reliability, ResourceLimits};
-use rustdds::{DomainParticipant, QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, TopicKind};
+use rustdds::{
+    DomainParticipant, DomainParticipantBuilder, QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier,
+    TopicKind,
+};
 
 use crate::{Channel, Counters, EndpointId, Sample, Transport, TransportError, TransportStats};
+
+/// Whether user data to several same-host readers goes out once, as multicast (see the module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Multicast {
+    /// [`Multicast::On`] when the loopback interface is up and multicast-capable, [`Multicast::Off`] otherwise.
+    #[default]
+    Auto,
+    /// Same-host readers share one multicast datagram (`rustdds` `same_host_loopback(false)`). Discovery then
+    /// needs a multicast-capable interface, since the unicast "localhost peers" announcements are off too. Each
+    /// transport runs two participants (see [`RtpsTransport::new`]); `rustdds` allows 120 participants per domain
+    /// and host, so at most 60 such transports share a domain on one host.
+    On,
+    /// `rustdds`'s default: a reader confirmed to be on this host gets its own unicast copy over loopback.
+    Off,
+}
+
+impl Multicast {
+    /// Whether this setting means multicast on this host now (`Auto` asks [`loopback_multicast_capable`]).
+    pub fn resolve(self) -> bool {
+        match self {
+            Multicast::Auto => loopback_multicast_capable(),
+            Multicast::On => true,
+            Multicast::Off => false,
+        }
+    }
+}
+
+/// Whether a loopback interface with an IPv4 address is up and multicast-capable in this network namespace,
+/// as `rustdds` sees interfaces (the same `netdev` enumeration), so that it joins its multicast groups on it.
+pub fn loopback_multicast_capable() -> bool {
+    netdev::get_interfaces()
+        .iter()
+        .any(|iface| iface.is_loopback() && iface.is_up() && iface.is_multicast() && !iface.ipv4.is_empty())
+}
 
 /// Settings of an [`RtpsTransport`].
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -67,6 +116,8 @@ pub struct RtpsConfig {
     /// the module documentation: with one shared participant, fragmented samples are sent twice to same-host
     /// readers and delivery stalls). `false` keeps one participant per transport, for comparison only.
     pub separate_reader_participant: bool,
+    /// One multicast datagram for all same-host readers, or one unicast copy each.
+    pub multicast: Multicast,
 }
 
 impl Default for RtpsConfig {
@@ -81,6 +132,7 @@ impl Default for RtpsConfig {
             pace_bytes: 4 << 20,
             max_blocking: Duration::from_secs(2),
             separate_reader_participant: true,
+            multicast: Multicast::Auto,
         }
     }
 }
@@ -202,13 +254,20 @@ pub struct RtpsTransport {
     local: EndpointId,
     unpaced_large_bytes: AtomicUsize,
     config: RtpsConfig,
+    multicast: bool,
     _publishing: DomainParticipant,
+    /// The readers' own participant (see [`RtpsTransport::new`]); `None` only when neither
+    /// `separate_reader_participant` nor multicast asks for it.
     _subscribing: Option<DomainParticipant>,
 }
 
 impl std::fmt::Debug for RtpsTransport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("RtpsTransport").field("local", &self.local).field("config", &self.config).finish()
+        f.debug_struct("RtpsTransport")
+            .field("local", &self.local)
+            .field("config", &self.config)
+            .field("multicast", &self.multicast)
+            .finish()
     }
 }
 
@@ -229,17 +288,30 @@ impl RtpsTransport {
     /// Joins the DDS domain (one or two participants, see [`RtpsConfig::separate_reader_participant`]) and starts
     /// the receiving thread.
     ///
+    /// With multicast ([`RtpsConfig::multicast`]) the readers always live in a second participant of their own,
+    /// whatever `separate_reader_participant` says. A `rustdds` writer also sends to the readers of its own
+    /// participant, and it never learns a route to its own participant (it does not record where its own traffic
+    /// arrives), so that reader takes the fallback path, whose sends are de-duplicated separately from the routed
+    /// ones: every sample would go to the multicast group twice. A reader in another participant is routed like
+    /// any remote reader, and its multicast route is the one datagram all readers share.
+    ///
     /// # Errors
     /// [`TransportError::Setup`] if a participant, a topic, a reader or a writer cannot be created.
     pub fn new(config: RtpsConfig) -> Result<Self, TransportError> {
+        let multicast = config.multicast.resolve();
         let join = |role: &str| {
-            DomainParticipant::new(config.domain_id).map_err(|e| TransportError::Setup {
-                what: format!("{role} participant in domain {}", config.domain_id),
-                detail: format!("{e:?}"),
+            DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast).build().map_err(|e| {
+                TransportError::Setup {
+                    what: format!("{role} participant in domain {}", config.domain_id),
+                    detail: format!("{e:?}"),
+                }
             })
         };
         let publishing = join("publishing")?;
-        let subscribing = if config.separate_reader_participant { Some(join("subscribing")?) } else { None };
+        // Multicast needs the readers apart too: rustdds never routes a writer to its own participant's readers,
+        // and their fallback path would send a second copy.
+        let subscribing =
+            if config.separate_reader_participant || multicast { Some(join("subscribing")?) } else { None };
         let qos = qos(&config);
         let publisher = publishing.create_publisher(&qos).map_err(setup("publisher"))?;
         let subscriber =
@@ -289,6 +361,7 @@ impl RtpsTransport {
             local,
             unpaced_large_bytes: AtomicUsize::new(0),
             config,
+            multicast,
             _publishing: publishing,
             _subscribing: subscribing,
         })
@@ -297,6 +370,11 @@ impl RtpsTransport {
     /// The settings in force.
     pub fn config(&self) -> &RtpsConfig {
         &self.config
+    }
+
+    /// Whether this participant sends to same-host readers as multicast ([`RtpsConfig::multicast`] resolved).
+    pub fn multicast(&self) -> bool {
+        self.multicast
     }
 }
 

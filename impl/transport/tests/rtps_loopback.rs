@@ -31,6 +31,9 @@ fn loopback_delivers_everything_in_order_per_channel() {
     let a = RtpsTransport::new(config(&prefix)).unwrap();
     let b = RtpsTransport::new(config(&prefix)).unwrap();
     assert_ne!(a.local_id(), b.local_id());
+    // `Multicast::Auto`: multicast exactly where the loopback is multicast-capable (scripts/test.sh runs this test
+    // again in a namespace where it is).
+    assert_eq!(a.multicast(), transport::rtps::loopback_multicast_capable());
     wait_for_match(&a, &b);
     while a.try_recv().is_some() {}
 
