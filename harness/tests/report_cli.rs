@@ -107,6 +107,9 @@ fn tiny_report_has_every_figure_and_section() {
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     assert_eq!(results["provenance"]["schema_version"], measure::SCHEMA_VERSION);
+    let network = results["provenance"]["network"].as_str().unwrap();
+    assert!(network.contains("network namespace") && network.contains("RTPS multicast"), "{network}");
+    assert!(report.contains(&format!("| network | {network} |")));
     assert_eq!(results["mode"], "quick");
     let replay = results["replay"].as_array().unwrap();
     assert_eq!(replay.len(), 8, "2 logs x 2 transports x 2 agent counts x 1 seed");

@@ -4,8 +4,9 @@
 //! `quick` set (the default, at most 5 minutes on 2 cores) or its `full` sweep (`--full`) with a progress bar, and
 //! writes into `--out` (default `reports/<name>-<mode>`): `results.json` (versioned schema with commit, rustc,
 //! machine, seeds and dataset checksums), the figures as SVG and PNG, one MCAP recording per run under `runs/`
-//! (metrics on JSON-schema channels, for Foxglove; `measure::record`) and `report.md`. Every run is in process;
-//! the report says so on every figure.
+//! (metrics on JSON-schema channels, for Foxglove; `measure::record`) and `report.md`. Each figure and table says
+//! which transport it used (in process, or receivers as separate processes) and on which network (`--netns`: by
+//! default the whole report re-runs itself in a fresh network namespace with a multicast-capable loopback).
 
 use std::path::PathBuf;
 
@@ -29,6 +30,12 @@ pub struct ReportArgs {
     /// Run the file's whole sweep.
     #[arg(long)]
     full: bool,
+    /// Run the whole report in a fresh network namespace whose loopback is multicast-capable (root, `unshare` and
+    /// `ip`): the loopback counters then count only the report's traffic, and RTPS sends one multicast datagram
+    /// for all same-host readers, as the paper's configuration does. `auto` falls back to the host's network with
+    /// a note; the report says which it was.
+    #[arg(long, value_enum, default_value_t = super::bench::NetnsMode::Auto)]
+    netns: super::bench::NetnsMode,
 }
 
 /// Runs `cortex report`.
@@ -37,6 +44,20 @@ pub struct ReportArgs {
 /// An experiment file that cannot be read or parsed, a log that cannot be read, a failed run, or a report that
 /// cannot be written.
 pub fn run(args: ReportArgs) -> anyhow::Result<()> {
+    use super::bench::NetnsMode;
+    if measure::netns::inside().is_none() && args.netns != NetnsMode::Off {
+        match measure::netns::reexec_in_fresh_netns(measure::netns::NetnsSetup { multicast: true }) {
+            Ok(status) if status.success() => return Ok(()),
+            Ok(status) => anyhow::bail!("the report in a fresh network namespace failed ({status})"),
+            Err(error) if args.netns == NetnsMode::Require => {
+                return Err(error).context("--netns require: cannot run in a fresh network namespace");
+            }
+            Err(error) => eprintln!(
+                "note: no fresh network namespace ({error}); the report runs on the host's network, its loopback \
+                 counters include other traffic"
+            ),
+        }
+    }
     let file = ExperimentFile::load(&args.config)?;
     let root = ExperimentFile::root_of(&args.config);
     let (mode, set) = if args.full { ("full", &file.full) } else { ("quick", &file.quick) };

@@ -128,6 +128,26 @@ pub struct Provenance {
     pub seeds: BTreeMap<String, u64>,
     /// Dataset files used.
     pub datasets: Vec<DatasetChecksum>,
+    /// Where the run's network traffic went, and so what its loopback counters mean ([`network_description`]).
+    #[serde(default)]
+    pub network: String,
+}
+
+/// Where this process's network traffic goes: a fresh namespace made by [`crate::netns`] (its `lo` counts only the
+/// run's traffic) or the host's (other processes add to `lo`), and whether RTPS sends to same-host readers as one
+/// multicast datagram (`transport::rtps::Multicast::Auto` resolved here).
+pub fn network_description() -> String {
+    let place = match crate::netns::inside() {
+        Some(setup) if setup.multicast => "fresh network namespace (lo counts only this run), lo multicast-capable",
+        Some(_) => "fresh network namespace (lo counts only this run), lo without multicast",
+        None => "host network namespace (lo also counts other processes' traffic)",
+    };
+    let multicast = if transport::rtps::loopback_multicast_capable() {
+        "RTPS multicast on: one datagram for all same-host readers"
+    } else {
+        "RTPS multicast off: one unicast copy per reader"
+    };
+    format!("{place}; {multicast}")
 }
 
 /// The command line, with the program named by its file name only (`cortex report ...`), not by the path of the
@@ -163,6 +183,7 @@ impl Provenance {
                 .map_or(0, |d| d.as_secs()),
             seeds: BTreeMap::new(),
             datasets: Vec::new(),
+            network: network_description(),
         }
     }
 

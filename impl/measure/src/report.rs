@@ -84,6 +84,7 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
         vec![
             format!("command: {}   commit {}   {}", p.command, p.short_commit(), p.rustc),
             format!("machine: {}", p.machine.summary()),
+            format!("network: {}", p.network),
             format!("transport: {transport}"),
             format!("seeds: {seeds}"),
         ]
@@ -257,6 +258,7 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
     );
     let _ = writeln!(md, "| compiler | {} ({} build) |", p.rustc, if p.release_build { "release" } else { "debug" });
     let _ = writeln!(md, "| machine | {} |", p.machine.summary());
+    let _ = writeln!(md, "| network | {} |", p.network);
     let _ = writeln!(md, "| started | {} s after the Unix epoch; the set took {:.1} s |", p.started_unix_s, r.seconds);
     let seeds = p.seeds.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(", ");
     let _ = writeln!(md, "| seeds | {seeds} |");
