@@ -171,11 +171,20 @@ fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentRow {
     }
 }
 
-/// A role's BICA statistics, by a remote call from the bridge agent.
+/// A role's BICA statistics, by a remote call from the bridge agent. The call is a read, so it is tried up to
+/// three times (1 s each): with `--faults`, a request or reply can be lost like any other sample.
 fn role_statistics(bridge: &agent::Agent<AgentTransport>, id: u32) -> Result<Vec<ComponentRow>, String> {
-    let reply: bica::service::ComponentsReply = bridge
-        .call(agent::AgentId(id), bica::service::COMPONENTS, &(), Duration::from_secs(2))
-        .map_err(|e| e.to_string())?;
+    let mut attempts = Vec::new();
+    let reply: bica::service::ComponentsReply = loop {
+        match bridge.call(agent::AgentId(id), bica::service::COMPONENTS, &(), Duration::from_secs(1)) {
+            Ok(reply) => break reply,
+            Err(error) if attempts.len() < 2 => attempts.push(error.to_string()),
+            Err(error) => {
+                attempts.push(error.to_string());
+                return Err(format!("{} attempts: {}", attempts.len(), attempts.join("; ")));
+            }
+        }
+    };
     let ms = |ns: u64| ns as f64 / 1e6;
     Ok(reply
         .statistics
