@@ -296,8 +296,7 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
             placement(link)
         );
     }
-    let (n_lo, n_hi) =
-        (r.set.agents.iter().min().copied().unwrap_or(0), r.set.agents.iter().max().copied().unwrap_or(0));
+    let n_hi = r.set.agents.iter().max().copied().unwrap_or(0);
     let first_log = r.set.logs.first().and_then(|l| l.path.file_name()).map(|n| n.to_string_lossy().into_owned());
     let bw = |link: &str, n: u32, f: fn(&RunResult) -> Option<f64>| {
         let values: Vec<f64> = r
@@ -316,19 +315,36 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
         .into_iter()
         .find(|link| r.replay.iter().any(|x| x.transport == *link))
         .unwrap_or("rtps");
-    match (bw(bw_link, n_lo, sent), bw(bw_link, n_hi, sent), bw(bw_link, n_lo, lo), bw(bw_link, n_hi, lo)) {
-        (Some(s_lo), Some(s_hi), Some(l_lo), Some(l_hi)) => {
-            let growth = l_hi / l_lo.max(1e-9);
+    let mut ns: Vec<u32> = r.set.agents.clone();
+    ns.sort_unstable();
+    ns.dedup();
+    let points: Vec<(u32, f64, f64)> =
+        ns.iter().filter_map(|&n| Some((n, bw(bw_link, n, sent)?, bw(bw_link, n, lo)?))).collect();
+    match points.first() {
+        Some(&(n_first, _, l_first)) if points.len() > 1 => {
+            let growth = |l: f64| l / l_first.max(1e-9);
+            let series = points
+                .iter()
+                .map(|(n, s, l)| format!("N={n}: {l:.2} MB/s (x{:.1}; transport counters {s:.2})", growth(*l)))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let flat_until = points.iter().take_while(|(_, _, l)| growth(*l) < 1.5).last().map_or(n_first, |p| p.0);
+            let multicast =
+                if r.provenance.network.contains("multicast on") { "multicast on" } else { "multicast off" };
+            let verdict = if flat_until == n_hi {
+                format!("holds on loopback ({multicast})")
+            } else if flat_until > n_first {
+                format!(
+                    "holds up to N={flat_until} ({multicast}), not beyond: see the latency and CPU tables for what \
+                     happens at larger N"
+                )
+            } else {
+                format!("does not hold ({multicast}): loopback traffic grows with N")
+            };
             let _ = writeln!(
                 md,
-                "| bandwidth constant in the number of agents (multicast) | DSR_d paper | {bw_link}, {log_name}: sent \
-                 (transport counters) {s_lo:.2} MB/s at N={n_lo}, {s_hi:.2} MB/s at N={n_hi}; loopback tx (OS) \
-                 {l_lo:.2} MB/s at N={n_lo}, {l_hi:.2} MB/s at N={n_hi} (x{growth:.1}) | {} |",
-                if growth < 1.5 {
-                    "holds on loopback"
-                } else {
-                    "does not hold: loopback traffic grows with N (one copy per reader, not multicast)"
-                }
+                "| bandwidth constant in the number of agents (multicast) | DSR_d paper | {bw_link}, {log_name}, loopback \
+                 tx (OS, the report's network namespace) per N: {series} | {verdict} |"
             );
         }
         _ => {
