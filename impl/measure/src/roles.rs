@@ -131,6 +131,27 @@ pub fn run(experiment: &RolesExperiment, root: &Path, program: &Path, domain: u1
     serde_json::from_slice(&output.stdout).context("the roles replay printed no summary")
 }
 
+/// A type name without its module paths: `perception::sensors::SensorReader<perception::sensors::Camera>` →
+/// `SensorReader<Camera>`.
+pub fn short_type_name(name: &str) -> String {
+    let mut out = String::with_capacity(name.len());
+    let mut token = String::new();
+    let flush = |token: &mut String, out: &mut String| {
+        out.push_str(token.rsplit("::").next().unwrap_or(token));
+        token.clear();
+    };
+    for c in name.chars() {
+        if c.is_alphanumeric() || c == '_' || c == ':' {
+            token.push(c);
+        } else {
+            flush(&mut token, &mut out);
+            out.push(c);
+        }
+    }
+    flush(&mut token, &mut out);
+    out
+}
+
 /// Appends the report's section (nothing to say beyond "not run" when the set has no `roles` section).
 pub fn section(md: &mut String, experiment: Option<&RolesExperiment>, result: Option<&RolesResult>) {
     let _ = writeln!(md, "{SECTION}\n");
@@ -165,6 +186,13 @@ pub fn section(md: &mut String, experiment: Option<&RolesExperiment>, result: Op
     );
     let _ = writeln!(
         md,
+        "Lateness is measured against each component's own release grid. A component stepped by its parent in the \
+         cascade (the camera reader and colour labeller under the blob detector; the stimuli and head under the \
+         search/track behaviour) runs when its parent runs, so a phase offset of up to one parent period shows as \
+         lateness and misses there; the top of each cascade shows the scheduler's own lateness.\n"
+    );
+    let _ = writeln!(
+        md,
         "| agent | role | nodes | samples received | component | achieved / nominal Hz | runs | misses | skipped | lateness p99 ms | step p99 ms |\n|---:|---|---:|---:|---|---:|---:|---:|---:|---:|---:|"
     );
     for a in &r.agents {
@@ -182,7 +210,7 @@ pub fn section(md: &mut String, experiment: Option<&RolesExperiment>, result: Op
                 a.role,
                 a.nodes,
                 a.samples_received,
-                c.name.rsplit("::").next().unwrap_or(&c.name),
+                short_type_name(&c.name),
                 c.achieved_hz,
                 c.nominal_hz,
                 c.runs,
@@ -224,6 +252,11 @@ mod tests {
             "{md}"
         );
         assert!(md.contains("every digest equal 120 ms after the replay ended"), "{md}");
+        assert_eq!(
+            short_type_name("bica::fsm::Fsm<perception::behaviour::SearchTrack, perception::behaviour::Data>"),
+            "Fsm<SearchTrack, Data>"
+        );
+        assert_eq!(short_type_name("Plain"), "Plain");
         let mut md = String::new();
         section(&mut md, None, None);
         assert!(md.contains("Not run"));
