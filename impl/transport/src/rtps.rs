@@ -12,11 +12,21 @@
 //! than stalled. Domain id and topic prefix are configurable so several graphs can share a host; discovery uses
 //! the standard unicast locators and works on loopback without network configuration.
 //!
+//! A sample meant for one peer ([`Transport::publish_to`], e.g. a graph answer) is written to that participant's
+//! reader alone (a directed write; the other readers get a GAP for its sequence number), so a multi-megabyte answer
+//! is not copied to every reader — including this participant's own reader, which rustdds matches too.
+//!
+//! Discovery is observed through the participant's status events: [`RtpsTransport::discovery`] tells when the
+//! first remote participant was discovered and when each channel's writer and reader matched their first remote
+//! endpoint, and [`Transport::sync_matches`] counts the matches on [`Channel::Sync`] so a joining agent can ask for
+//! the graph as soon as a peer can hear it. (rustdds sends a new participant's first discovery announcement 100 ms
+//! after it is created — a constant of rustdds 0.15, not a setting — so no peer is found sooner than that.)
+//!
 //! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B), the RTPS DATA and
 //! INFO_TS submessages (36 B), and one RTPS header plus UDP/IPv4 header (48 B) per datagram of up to 64 KiB;
 //! acknowledgements and heartbeats are not seen by this layer.
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -25,9 +35,47 @@ use bytes::Bytes;
 use crossbeam_channel::{Receiver, SendTimeoutError, Sender, bounded};
 use rustdds::no_key::{DataWriter, Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter, SimpleDataReader};
 use rustdds::policy::{Durability, History, Reliability, ResourceLimits};
-use rustdds::{DomainParticipant, QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, TopicKind};
+use rustdds::{
+    DomainParticipant, DomainParticipantStatusEvent, DomainParticipantStatusListener, GUID, QosPolicies,
+    QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, StatusEvented, TopicKind, WriteOptionsBuilder,
+};
 
-use crate::{Channel, Counters, EndpointId, Sample, Transport, TransportError, TransportStats};
+use crate::{Channel, Clock, Counters, EndpointId, Sample, SystemClock, Transport, TransportError, TransportStats};
+
+/// When discovery reached each step, in wall-clock nanoseconds since the Unix epoch ([`SystemClock`], so times of
+/// different processes on one host compare); `None` until it happens.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DiscoveryTimes {
+    /// The participant, its topics, writers and readers were created.
+    pub created_ns: u64,
+    /// The first remote participant was discovered.
+    pub first_participant_ns: Option<u64>,
+    /// Per channel (by [`Channel::index`]): this participant's writer matched its first remote reader.
+    pub writer_matched_ns: [Option<u64>; 3],
+    /// Per channel (by [`Channel::index`]): this participant's reader matched its first remote writer.
+    pub reader_matched_ns: [Option<u64>; 3],
+}
+
+/// Most remote readers remembered per channel for directed writes; past it, [`Transport::publish_to`] of an
+/// unremembered peer falls back to a write to every reader.
+const MAX_REMEMBERED_READERS: usize = 4096;
+
+/// What the receiving thread learns from discovery, shared with the transport.
+#[derive(Debug, Default)]
+struct DiscoveryState {
+    times: Mutex<DiscoveryTimes>,
+    sync_matches: AtomicU64,
+    /// The remote readers each channel's writer has matched (by [`Channel::index`]), for directed writes.
+    readers: Mutex<[Vec<GUID>; 3]>,
+}
+
+impl DiscoveryState {
+    /// A matched remote reader of `channel` in the participant `to`.
+    fn reader_of(&self, channel: Channel, to: EndpointId) -> Option<GUID> {
+        let readers = self.readers.lock().unwrap_or_else(|p| p.into_inner());
+        readers[channel.index()].iter().copied().find(|guid| endpoint_of(*guid) == to)
+    }
+}
 
 /// Settings of an [`RtpsTransport`].
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -180,6 +228,7 @@ pub struct RtpsTransport {
     counters: Arc<Counters>,
     local: EndpointId,
     unpaced_large_bytes: AtomicUsize,
+    discovery: Arc<DiscoveryState>,
     config: RtpsConfig,
     _participant: DomainParticipant,
 }
@@ -218,6 +267,7 @@ impl RtpsTransport {
         let subscriber = participant.create_subscriber(&qos).map_err(setup("subscriber"))?;
         let mut writers = Vec::new();
         let mut readers = Vec::new();
+        let mut endpoints = Vec::new();
         for channel in Channel::ALL {
             let name = format!("{}_{}", config.topic_prefix, channel.name());
             let topic = participant
@@ -229,19 +279,25 @@ impl RtpsTransport {
             let reader = subscriber
                 .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&topic, Some(qos.clone()))
                 .map_err(setup(format!("reader of {name}")))?;
+            endpoints.push((channel, writer.guid(), reader.guid()));
             writers.push(Mutex::new(writer));
             readers.push((channel, reader));
         }
         let local = endpoint_of(participant.guid());
+        let discovery = Arc::new(DiscoveryState::default());
+        discovery.times.lock().unwrap_or_else(|p| p.into_inner()).created_ns = SystemClock.now_ns();
+        let status = participant.status_listener();
         let (sender, inbox) = bounded(config.inbox_capacity.max(1));
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(Counters::default());
         let receiver = {
             let stop = Arc::clone(&stop);
             let counters = Arc::clone(&counters);
+            let own = participant.guid();
+            let watch = DiscoveryWatch { status, own, endpoints, state: Arc::clone(&discovery) };
             std::thread::Builder::new()
                 .name("rtps-receive".into())
-                .spawn(move || receive_loop(readers, sender, stop, counters, local))
+                .spawn(move || receive_loop(readers, watch, sender, stop, counters, local))
                 .map_err(|e| TransportError::Setup { what: "receiving thread".into(), detail: e.to_string() })?
         };
         Ok(RtpsTransport {
@@ -252,6 +308,7 @@ impl RtpsTransport {
             counters,
             local,
             unpaced_large_bytes: AtomicUsize::new(0),
+            discovery,
             config,
             _participant: participant,
         })
@@ -260,6 +317,76 @@ impl RtpsTransport {
     /// The settings in force.
     pub fn config(&self) -> &RtpsConfig {
         &self.config
+    }
+
+    /// When discovery found the first peer and matched each channel's writer and reader (see [`DiscoveryTimes`]).
+    pub fn discovery(&self) -> DiscoveryTimes {
+        *self.discovery.times.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// The receiving thread's view of discovery: the participant's status events, and which local writer and reader
+/// serve which channel.
+struct DiscoveryWatch {
+    status: DomainParticipantStatusListener,
+    /// This participant's GUID (its prefix is that of all its endpoints): rustdds also matches a participant's
+    /// writers with its own readers, which is no peer.
+    own: GUID,
+    endpoints: Vec<(Channel, GUID, GUID)>,
+    state: Arc<DiscoveryState>,
+}
+
+impl DiscoveryWatch {
+    /// Records the status events waiting (a bounded number per call, so data is never starved).
+    fn drain(&self) {
+        for _ in 0..256 {
+            let Some(event) = self.status.try_recv_status() else { return };
+            let now = SystemClock.now_ns();
+            let mut times = self.state.times.lock().unwrap_or_else(|p| p.into_inner());
+            match event {
+                DomainParticipantStatusEvent::ParticipantDiscovered { dpd } if dpd.guid.prefix != self.own.prefix => {
+                    times.first_participant_ns.get_or_insert(now);
+                }
+                DomainParticipantStatusEvent::RemoteReaderMatched { local_writer, remote_reader }
+                    if remote_reader.prefix != self.own.prefix =>
+                {
+                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, w, _)| *w == local_writer) {
+                        times.writer_matched_ns[channel.index()].get_or_insert(now);
+                        let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                        let known = &mut readers[channel.index()];
+                        if !known.contains(&remote_reader) && known.len() < MAX_REMEMBERED_READERS {
+                            known.push(remote_reader);
+                        }
+                        if *channel == Channel::Sync {
+                            self.state.sync_matches.fetch_add(1, Ordering::Release);
+                        }
+                    }
+                }
+                DomainParticipantStatusEvent::RemoteWriterMatched { local_reader, remote_writer }
+                    if remote_writer.prefix != self.own.prefix =>
+                {
+                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, _, r)| *r == local_reader) {
+                        times.reader_matched_ns[channel.index()].get_or_insert(now);
+                        if *channel == Channel::Sync {
+                            self.state.sync_matches.fetch_add(1, Ordering::Release);
+                        }
+                    }
+                }
+                DomainParticipantStatusEvent::ReaderLost { guid, .. } => {
+                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                    for known in readers.iter_mut() {
+                        known.retain(|reader| *reader != guid);
+                    }
+                }
+                DomainParticipantStatusEvent::ParticipantLost { id, .. } => {
+                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                    for known in readers.iter_mut() {
+                        known.retain(|reader| reader.prefix != id);
+                    }
+                }
+                _ => {}
+            }
+        }
     }
 }
 
@@ -274,6 +401,7 @@ impl Drop for RtpsTransport {
 
 fn receive_loop(
     mut readers: Vec<(Channel, Reader)>,
+    mut watch: DiscoveryWatch,
     sender: Sender<Sample>,
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
@@ -293,6 +421,12 @@ fn receive_loop(
             return;
         }
     }
+    if let Err(error) =
+        poll.registry().register(watch.status.as_status_source_mio1(), Token(readers.len()), Interest::READABLE)
+    {
+        // Discovery times stay unknown and joiners fall back to their retry period; data still flows.
+        tracing::warn!("rtps receive: cannot watch discovery events: {error}");
+    }
     let mut events = Events::with_capacity(16);
     while !stop.load(Ordering::Relaxed) {
         if let Err(error) = poll.poll(&mut events, Some(Duration::from_millis(20)))
@@ -301,6 +435,7 @@ fn receive_loop(
             tracing::error!("rtps receive: poll failed: {error}");
             std::thread::sleep(Duration::from_millis(5));
         }
+        watch.drain();
         // Take from every reader each round: a notification may have been drained by an earlier round.
         for (channel, reader) in &readers {
             reader.drain_read_notifications();
@@ -346,6 +481,36 @@ impl Transport for RtpsTransport {
     }
 
     fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
+        self.write(channel, bytes, None)
+    }
+
+    fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
+        // A peer whose reader discovery has not reported yet gets the sample like everyone else.
+        let reader = self.discovery.reader_of(channel, to);
+        self.write(channel, bytes, reader)
+    }
+
+    fn try_recv(&self) -> Option<Sample> {
+        self.counters.take(&self.inbox, None)
+    }
+
+    fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
+        self.counters.take(&self.inbox, Some(timeout))
+    }
+
+    fn stats(&self) -> TransportStats {
+        self.counters.snapshot()
+    }
+
+    fn sync_matches(&self) -> u64 {
+        self.discovery.sync_matches.load(Ordering::Acquire)
+    }
+}
+
+impl RtpsTransport {
+    /// Writes one sample to every matched reader of `channel`, or to `reader` alone (the others are told, by a GAP,
+    /// that the sequence number is not for them), with back-pressure and pacing of large samples.
+    fn write(&self, channel: Channel, bytes: Bytes, reader: Option<GUID>) -> Result<(), TransportError> {
         let size = bytes.len();
         if size > self.config.max_sample_bytes {
             return Err(TransportError::TooLarge {
@@ -358,7 +523,13 @@ impl Transport for RtpsTransport {
         let deadline = Instant::now() + self.config.max_blocking * 4;
         let payload = Payload(bytes);
         loop {
-            match writer.write(payload.clone(), None) {
+            let written = match reader {
+                Some(reader) => writer
+                    .write_with_options(payload.clone(), WriteOptionsBuilder::new().to_single_reader(reader).build())
+                    .map(|_| ()),
+                None => writer.write(payload.clone(), None),
+            };
+            match written {
                 Ok(()) => break,
                 Err(rustdds::dds::result::WriteError::WouldBlock { .. }) if Instant::now() < deadline => {
                     // The send window is full: back-pressure. Give acknowledgements a chance, then retry.
@@ -378,18 +549,6 @@ impl Transport for RtpsTransport {
         }
         self.counters.sent(size, estimated_wire_bytes(size));
         Ok(())
-    }
-
-    fn try_recv(&self) -> Option<Sample> {
-        self.counters.take(&self.inbox, None)
-    }
-
-    fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
-        self.counters.take(&self.inbox, Some(timeout))
-    }
-
-    fn stats(&self) -> TransportStats {
-        self.counters.snapshot()
     }
 }
 
