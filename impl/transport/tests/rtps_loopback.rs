@@ -64,3 +64,46 @@ fn loopback_delivers_everything_in_order_per_channel() {
     let stats = a.stats();
     assert!(stats.samples_sent >= 2024 && stats.wire_bytes_sent > stats.payload_bytes_sent);
 }
+
+/// Waits (bounded) until `a`'s discovery has matched `n` remote endpoints on the sync channel.
+fn wait_for_sync_matches(a: &RtpsTransport, n: u64) {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while a.sync_matches() < n {
+        assert!(Instant::now() < deadline, "only {} sync matches within 20 s, {n} expected", a.sync_matches());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn a_directed_sample_reaches_its_peer_alone_and_discovery_is_timed() {
+    let prefix = format!("d{}", std::process::id());
+    let a = RtpsTransport::new(config(&prefix)).unwrap();
+    let b = RtpsTransport::new(config(&prefix)).unwrap();
+    let c = RtpsTransport::new(config(&prefix)).unwrap();
+    // b's and c's sync readers and writers: four matches, none of them a's own reader and writer.
+    wait_for_sync_matches(&a, 4);
+    let times = a.discovery();
+    let sync = Channel::Sync.index();
+    let first_peer = times.first_participant_ns.expect("a peer was discovered");
+    assert!(first_peer >= times.created_ns);
+    assert!(times.writer_matched_ns[sync].is_some_and(|t| t >= times.created_ns));
+    assert!(times.reader_matched_ns[sync].is_some_and(|t| t >= times.created_ns));
+
+    // Per writer, samples arrive in order: c seeing "everyone" first proves it was never sent "for b".
+    a.publish_to(Channel::Sync, Bytes::from_static(b"for b"), b.local_id()).unwrap();
+    a.publish(Channel::Sync, Bytes::from_static(b"everyone")).unwrap();
+    let next_sync = |t: &RtpsTransport| {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while Instant::now() < deadline {
+            if let Some(sample) = t.recv_timeout(Duration::from_millis(100))
+                && sample.channel == Channel::Sync
+            {
+                return sample.bytes;
+            }
+        }
+        panic!("no sync sample within 20 s");
+    };
+    assert_eq!(next_sync(&b), Bytes::from_static(b"for b"));
+    assert_eq!(next_sync(&b), Bytes::from_static(b"everyone"));
+    assert_eq!(next_sync(&c), Bytes::from_static(b"everyone"), "a sample directed to b went to c too");
+}
