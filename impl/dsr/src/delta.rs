@@ -265,16 +265,11 @@ enum WireDot {
     Other(u32, u64),
 }
 
-/// The lists inside an entry (a register's values, a node's core, an edge's presence) nearly always hold one
-/// item: kept inline, so a 10k-node snapshot decodes without some hundred thousand small allocations. (A `SmallVec`
-/// is a sequence on the wire, exactly like a `Vec`.)
-type WireList<T> = SmallVec<[T; 1]>;
-
 #[derive(Serialize, Deserialize)]
 struct WireNode<'a> {
     id: u64,
     #[serde(borrow)]
-    core: WireList<WireEntry<(&'a str, &'a str)>>,
+    core: Vec<WireEntry<(&'a str, &'a str)>>,
     #[serde(borrow)]
     attrs: Vec<WireRegister<'a>>,
 }
@@ -284,7 +279,7 @@ struct WireEdge<'a> {
     from: u64,
     to: u64,
     edge_type: &'a str,
-    presence: WireList<WireEntry<()>>,
+    presence: Vec<WireEntry<()>>,
     #[serde(borrow)]
     attrs: Vec<WireRegister<'a>>,
 }
@@ -293,7 +288,7 @@ struct WireEdge<'a> {
 struct WireRegister<'a> {
     #[serde(borrow)]
     name: WireName<'a>,
-    values: WireList<WireEntry<Value>>,
+    values: Vec<WireEntry<Value>>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -339,7 +334,7 @@ fn to_wire<'d>(delta: &DeltaParts<'d>) -> WireDelta<'d> {
             cloud.push(wire_dot(*dot, origin));
         }
     }
-    let entries = |register: &Register<Value>| -> WireList<WireEntry<Value>> {
+    let entries = |register: &Register<Value>| -> Vec<WireEntry<Value>> {
         register
             .values
             .iter()
@@ -348,7 +343,7 @@ fn to_wire<'d>(delta: &DeltaParts<'d>) -> WireDelta<'d> {
     };
     fn attrs<'d>(
         attrs: &'d Attrs,
-        entries: &dyn Fn(&Register<Value>) -> WireList<WireEntry<Value>>,
+        entries: &dyn Fn(&Register<Value>) -> Vec<WireEntry<Value>>,
     ) -> Vec<WireRegister<'d>> {
         attrs
             .iter()
@@ -479,11 +474,7 @@ impl Decoder {
         Ok(dot)
     }
 
-    fn entries<T>(
-        &self,
-        entries: WireList<WireEntry<T>>,
-        place: &dyn Fn() -> String,
-    ) -> Result<Register<T>, DeltaError> {
+    fn entries<T>(&self, entries: Vec<WireEntry<T>>, place: &dyn Fn() -> String) -> Result<Register<T>, DeltaError> {
         check_len(place, entries.len())?;
         let mut values: SmallVec<[Entry<T>; 1]> = SmallVec::with_capacity(entries.len());
         for (index, entry) in entries.into_iter().enumerate() {
