@@ -20,11 +20,11 @@ use agent::{Agent, AgentConfig, AgentId};
 use anyhow::{Context, Result, bail};
 use bytes::Bytes;
 use clap::{Args, Subcommand, ValueEnum};
-use dsr::{Change, Element, NewNode, NodeId, Value, attrs};
+use dsr::{Change, Element, NewNode, NodeId, Replica, Value, attrs};
 use hdrhistogram::Histogram;
 use measure::netns::{self, LoopbackCounters, NetnsSetup};
 use transport::rtps::{Multicast, RtpsConfig, RtpsTransport, estimated_wire_bytes};
-use transport::{Channel, SystemClock, Transport};
+use transport::{Channel, Clock, SystemClock, Transport};
 
 /// Arguments of `cortex bench`.
 #[derive(Debug, Args)]
@@ -678,14 +678,20 @@ fn join(args: JoinArgs) -> Result<()> {
         bail!("the first agent did not start");
     }
     build_tree(&agent, args.nodes)?;
-    // In-process: snapshot encode, decode and join into an empty replica (the rebuild alone).
+    // In-process: snapshot encode (timed inside the agent's lock, so a wait for the lock is not counted), decode
+    // and join into an empty replica (the rebuild alone).
+    let (bytes, encoded) = agent
+        .read(|replica| {
+            let started = Instant::now();
+            (replica.encode_snapshot(), started.elapsed())
+        })
+        .context("no graph")?;
     let started = Instant::now();
-    let bytes = agent.read(|r| r.snapshot().encode()).context("no graph")?;
-    let encoded = started.elapsed();
-    let mut fresh = dsr::Replica::new(dsr::ReplicaId(9999));
+    let mut fresh = Replica::new(dsr::ReplicaId(9999));
     fresh.apply(&dsr::Delta::decode(&bytes)?)?;
-    let rebuilt = started.elapsed();
-    // A new agent process joins.
+    let rebuilt = encoded + started.elapsed();
+    // A new agent process joins; both processes read the system clock, so their times compare.
+    let spawned_at_ns = SystemClock.now_ns();
     let mut helper = Helper::spawn(&[
         "bench".into(),
         "join-child".into(),
@@ -698,39 +704,197 @@ fn join(args: JoinArgs) -> Result<()> {
     ])?;
     let stdout = helper.0.stdout.take().context("helper stdout")?;
     let line = BufReader::new(stdout).lines().next().context("the joining process printed nothing")??;
-    let child: serde_json::Value = serde_json::from_str(&line).context("the joining process's report")?;
+    let child: JoinChildReport = serde_json::from_str(&line).context("the joining process's report")?;
+    let server = agent.status();
+    let breakdown =
+        JoinBreakdown::new(spawned_at_ns, &child, server.last_answer.as_ref(), agent.transport().discovery());
     let out = serde_json::json!({
         "nodes": args.nodes,
         "snapshot_bytes": bytes.len(),
         "snapshot_encode_ms": encoded.as_secs_f64() * 1e3,
         "snapshot_encode_decode_join_ms": rebuilt.as_secs_f64() * 1e3,
         "process": child,
+        "breakdown": breakdown,
+        "loadavg": loadavg(),
     });
     if args.json {
         println!("{out}");
     } else {
         println!("join of a {}-node graph (tree, 6 attributes + 1 RT edge per node)", args.nodes);
         println!(
-            "  snapshot: {} bytes; encode {:.1} ms; encode+decode+join {:.1} ms (in process)",
+            "  in process: snapshot {} bytes; encode {:.1} ms; encode+decode+join {:.1} ms",
             bytes.len(),
             encoded.as_secs_f64() * 1e3,
             rebuilt.as_secs_f64() * 1e3
         );
-        println!("  new agent process: {child}");
+        println!(
+            "  new agent process: {} of {} nodes, {} graph request(s)",
+            child.nodes, args.nodes, child.join_requests
+        );
+        breakdown.print();
+        println!("  load average: {}", loadavg());
     }
     Ok(())
 }
 
+/// The load average of this machine (`/proc/loadavg`), printed beside every figure.
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg").map_or_else(|_| "unknown".into(), |s| s.trim().to_owned())
+}
+
+/// What the joining process reports: its own steps and discovery, in ns since the Unix epoch.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct JoinChildReport {
+    /// Visible nodes once ready.
+    nodes: usize,
+    /// Whether all nodes arrived.
+    complete: bool,
+    /// `main` of the helper ran (the binary was loaded).
+    main_ns: u64,
+    /// The RTPS participant, topics, readers and writers exist.
+    participant_ns: u64,
+    /// The first remote participant was discovered.
+    peer_discovered_ns: Option<u64>,
+    /// The helper's sync writer matched a remote reader (its graph request can be heard).
+    sync_writer_matched_ns: Option<u64>,
+    /// The helper's sync reader matched a remote writer (the answer can reach it).
+    sync_reader_matched_ns: Option<u64>,
+    /// Graph requests published.
+    join_requests: u32,
+    /// The first and the last graph request published.
+    first_request_ns: Option<u64>,
+    last_request_ns: Option<u64>,
+    /// The answer reached the agent.
+    answer_received_ns: Option<u64>,
+    /// The snapshot was decoded.
+    decoded_ns: Option<u64>,
+    /// The replica was built: the agent became ready.
+    ready_ns: Option<u64>,
+    /// `wait_ready` returned in the helper's main thread.
+    ready_seen_ns: u64,
+}
+
+/// The join, step by step, in ms since the parent spawned the joining process (`at_ms`) and as durations.
+#[derive(Debug, serde::Serialize)]
+struct JoinBreakdown {
+    /// Milestones since the spawn, in order: name and ms (absent when not reached or not known).
+    at_ms: Vec<(&'static str, Option<f64>)>,
+    /// Spawn → ready: what a user waits for.
+    total_ms: Option<f64>,
+    /// Participant created → the sync channel matched both ways (rustdds discovery).
+    discovery_ms: Option<f64>,
+    /// The answered request reached the server → the joiner was ready (encode, transfer, decode, join).
+    request_to_ready_ms: Option<f64>,
+    /// Server: request received → encoded snapshot ready.
+    server_encode_ms: Option<f64>,
+    /// Whether the server took the snapshot from its cache.
+    server_snapshot_cached: Option<bool>,
+    /// Server: snapshot ready → publish returned.
+    server_publish_ms: Option<f64>,
+    /// Snapshot ready at the server → answer taken from the joiner's inbox.
+    transfer_ms: Option<f64>,
+    /// Joiner: answer received → snapshot decoded.
+    decode_ms: Option<f64>,
+    /// Joiner: decoded → replica built and ready.
+    join_ms: Option<f64>,
+}
+
+impl JoinBreakdown {
+    fn new(
+        spawned_ns: u64,
+        child: &JoinChildReport,
+        answer: Option<&agent::AnswerTiming>,
+        server_discovery: transport::rtps::DiscoveryTimes,
+    ) -> JoinBreakdown {
+        let ms = |from: u64, to: u64| (to as f64 - from as f64) / 1e6;
+        let since = |t: Option<u64>| t.map(|t| ms(spawned_ns, t));
+        let between = |a: Option<u64>, b: Option<u64>| Some(ms(a?, b?));
+        let sync_matched = match (child.sync_writer_matched_ns, child.sync_reader_matched_ns) {
+            (Some(w), Some(r)) => Some(w.max(r)),
+            _ => None,
+        };
+        let sync = Channel::Sync.index();
+        JoinBreakdown {
+            at_ms: vec![
+                ("main", since(Some(child.main_ns))),
+                ("participant created", since(Some(child.participant_ns))),
+                ("first graph request", since(child.first_request_ns)),
+                ("peer discovered", since(child.peer_discovered_ns)),
+                ("server: sync writer matched joiner", since(server_discovery.writer_matched_ns[sync])),
+                ("joiner: sync writer matched", since(child.sync_writer_matched_ns)),
+                ("joiner: sync reader matched", since(child.sync_reader_matched_ns)),
+                ("last graph request", since(child.last_request_ns)),
+                ("server: request received", since(answer.map(|a| a.request_received_ns))),
+                ("server: snapshot encoded", since(answer.map(|a| a.snapshot_ready_ns))),
+                ("server: answer published", since(answer.map(|a| a.published_ns))),
+                ("joiner: answer received", since(child.answer_received_ns)),
+                ("joiner: decoded", since(child.decoded_ns)),
+                ("joiner: ready", since(child.ready_ns)),
+                ("joiner: ready seen by wait_ready", since(Some(child.ready_seen_ns))),
+            ],
+            total_ms: since(child.ready_ns),
+            discovery_ms: between(Some(child.participant_ns), sync_matched),
+            request_to_ready_ms: between(answer.map(|a| a.request_received_ns), child.ready_ns),
+            server_encode_ms: answer.map(|a| ms(a.request_received_ns, a.snapshot_ready_ns)),
+            server_snapshot_cached: answer.map(|a| a.from_cache),
+            server_publish_ms: answer.map(|a| ms(a.snapshot_ready_ns, a.published_ns)),
+            transfer_ms: between(answer.map(|a| a.snapshot_ready_ns), child.answer_received_ns),
+            decode_ms: between(child.answer_received_ns, child.decoded_ns),
+            join_ms: between(child.decoded_ns, child.ready_ns),
+        }
+    }
+
+    fn print(&self) {
+        let show = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.1} ms"));
+        println!("  timeline, from spawning the joining process:");
+        for (name, at) in &self.at_ms {
+            println!("    {name:<38} {:>10}", show(*at));
+        }
+        println!("  total (spawn → ready)                  {:>10}", show(self.total_ms));
+        println!("  discovery (participant → sync matched) {:>10}", show(self.discovery_ms));
+        println!("  request received → ready               {:>10}", show(self.request_to_ready_ms));
+        let cached = match self.server_snapshot_cached {
+            Some(true) => " (cached)",
+            Some(false) => " (encoded)",
+            None => "",
+        };
+        println!("    server snapshot{cached:<11}            {:>10}", show(self.server_encode_ms));
+        println!("    server publish                       {:>10}", show(self.server_publish_ms));
+        println!("    transfer (encoded → received)        {:>10}", show(self.transfer_ms));
+        println!("    decode                               {:>10}", show(self.decode_ms));
+        println!("    join                                 {:>10}", show(self.join_ms));
+    }
+}
+
 fn join_child(args: JoinChildArgs) -> Result<()> {
-    let started = Instant::now();
+    let main_ns = SystemClock.now_ns();
     let transport = rtps(args.domain, &args.prefix, MulticastArg::Auto)?;
+    let participant_ns = transport.discovery().created_ns;
     let agent = Agent::start(bench_config(2, Duration::from_secs(60)), transport, Arc::new(SystemClock))?;
     if !agent.wait_ready(Duration::from_secs(60)) {
         bail!("no graph within 60 s");
     }
-    let ready_ms = started.elapsed().as_secs_f64() * 1e3;
-    let nodes = agent.status().nodes;
-    println!("{}", serde_json::json!({ "ready_ms": ready_ms, "nodes": nodes, "complete": nodes == args.nodes }));
+    let ready_seen_ns = SystemClock.now_ns();
+    let status = agent.status();
+    let discovery = agent.transport().discovery();
+    let sync = Channel::Sync.index();
+    let report = JoinChildReport {
+        nodes: status.nodes,
+        complete: status.nodes == args.nodes,
+        main_ns,
+        participant_ns,
+        peer_discovered_ns: discovery.first_participant_ns,
+        sync_writer_matched_ns: discovery.writer_matched_ns[sync],
+        sync_reader_matched_ns: discovery.reader_matched_ns[sync],
+        join_requests: status.join.requests,
+        first_request_ns: status.join.first_request_ns,
+        last_request_ns: status.join.last_request_ns,
+        answer_received_ns: status.join.answer_received_ns,
+        decoded_ns: status.join.decoded_ns,
+        ready_ns: status.join.ready_ns,
+        ready_seen_ns,
+    };
+    println!("{}", serde_json::to_string(&report)?);
     Ok(())
 }
 

@@ -147,6 +147,47 @@ pub struct NodeCopy {
     pub attrs: BTreeMap<String, Value>,
 }
 
+/// When each step of this agent's late join happened, in nanoseconds on the agent's clock; `None` for a step not
+/// reached (yet). With the system clock, times of agents in different processes on one host compare.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct JoinTimeline {
+    /// The agent started joining (it was created).
+    pub started_ns: u64,
+    /// The first graph request was handed to the transport.
+    pub first_request_ns: Option<u64>,
+    /// The last graph request handed to the transport before the graph came.
+    pub last_request_ns: Option<u64>,
+    /// Graph requests published while joining (periodic retries, and repeats when discovery matched a peer).
+    pub requests: u32,
+    /// The graph answer reached the agent (taken from the transport's inbox).
+    pub answer_received_ns: Option<u64>,
+    /// Bytes of that answer's snapshot.
+    pub answer_bytes: usize,
+    /// The snapshot was decoded and checked.
+    pub decoded_ns: Option<u64>,
+    /// The replica was built (snapshot joined, buffered deltas applied): the agent became ready.
+    pub ready_ns: Option<u64>,
+    /// It became ready alone (no answer within the join wait) rather than from a peer's graph.
+    pub alone: bool,
+}
+
+/// The latest graph request this agent answered, in nanoseconds on the agent's clock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AnswerTiming {
+    /// The joiner.
+    pub to: AgentId,
+    /// The request reached the agent (taken from the transport's inbox).
+    pub request_received_ns: u64,
+    /// The encoded snapshot was ready (encoded under the state lock, or taken from the cache).
+    pub snapshot_ready_ns: u64,
+    /// Whether the snapshot came from the cache (no encoding).
+    pub from_cache: bool,
+    /// The answer's publish returned: handed to the transport, including any pacing wait.
+    pub published_ns: u64,
+    /// Bytes of the snapshot.
+    pub snapshot_bytes: usize,
+}
+
 /// What an agent can tell about itself.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AgentStatus {
@@ -183,6 +224,10 @@ pub struct AgentStatus {
     pub edges: usize,
     /// The transport's counters.
     pub transport: TransportStats,
+    /// How this life's late join went.
+    pub join: JoinTimeline,
+    /// The latest graph request this agent answered, if any.
+    pub last_answer: Option<AnswerTiming>,
 }
 
 /// Mutable protocol state, behind one lock.
@@ -207,6 +252,10 @@ struct State {
     /// Graph requests answered recently, by (joiner, nonce), with the time: a joiner that repeats its request
     /// while a large answer is still on its way gets no second copy within [`ANSWER_HOLD_NS`].
     answered: BTreeMap<(AgentId, u64), u64>,
+    /// The transport's [`Transport::sync_matches`] when the last graph request went out.
+    sync_matches_seen: u64,
+    /// How the late join went.
+    timeline: JoinTimeline,
 }
 
 impl State {
@@ -225,18 +274,25 @@ impl State {
 
     /// The encoded snapshot (cached per context).
     fn snapshot_bytes(&mut self) -> Option<Bytes> {
+        self.snapshot_bytes_cached().map(|(bytes, _)| bytes)
+    }
+
+    /// The encoded snapshot (cached per context), and whether it came from the cache.
+    fn snapshot_bytes_cached(&mut self) -> Option<(Bytes, bool)> {
         let replica = self.replica.as_ref()?;
         if let Some((ctx, bytes)) = &self.snapshot_cache
             && ctx == replica.context()
         {
-            return Some(bytes.clone());
+            return Some((bytes.clone(), true));
         }
-        let bytes = Bytes::from(replica.snapshot().encode());
+        let bytes = Bytes::from(replica.encode_snapshot());
         self.snapshot_cache = Some((replica.context().clone(), bytes.clone()));
-        Some(bytes)
+        Some((bytes, false))
     }
 }
 
+/// The receiving thread's longest wait while joining.
+const JOINING_TICK: Duration = Duration::from_millis(2);
 /// How long a graph request stays answered (a repeat within it gets no second copy).
 const ANSWER_HOLD_NS: u64 = 1_000_000_000;
 /// Most remembered answered requests.
@@ -250,6 +306,10 @@ struct Inner<T> {
     state: Mutex<State>,
     subscribers: Mutex<Vec<Sender<ChangeSignal>>>,
     stop: AtomicBool,
+    /// Whether the replica exists (the receiving thread polls faster while joining).
+    joined: AtomicBool,
+    /// The latest graph request answered.
+    last_answer: Mutex<Option<AnswerTiming>>,
     rejected: AtomicU64,
     signals_dropped: AtomicU64,
     digest_mismatches: AtomicU64,
@@ -304,6 +364,8 @@ impl<T: Transport + 'static> Agent<T> {
             digest_cache: None,
             snapshot_cache: None,
             answered: BTreeMap::new(),
+            sync_matches_seen: 0,
+            timeline: JoinTimeline { started_ns: now, ..JoinTimeline::default() },
         };
         let inner = Inner {
             nonce,
@@ -312,6 +374,8 @@ impl<T: Transport + 'static> Agent<T> {
             state: Mutex::new(state),
             subscribers: Mutex::new(Vec::new()),
             stop: AtomicBool::new(false),
+            joined: AtomicBool::new(false),
+            last_answer: Mutex::new(None),
             rejected: AtomicU64::new(0),
             signals_dropped: AtomicU64::new(0),
             digest_mismatches: AtomicU64::new(0),
@@ -336,7 +400,9 @@ impl<T: Transport + 'static> Agent<T> {
             .name(format!("agent-{}", agent.inner.config.id.0))
             .spawn(move || {
                 while !inner.stop.load(Ordering::Relaxed) {
-                    if let Some(sample) = inner.transport.recv_timeout(tick) {
+                    // While joining, look often: a graph request goes out as soon as discovery matches a peer.
+                    let wait = if inner.joined.load(Ordering::Relaxed) { tick } else { tick.min(JOINING_TICK) };
+                    if let Some(sample) = inner.transport.recv_timeout(wait) {
                         inner.handle(sample);
                         for _ in 0..1024 {
                             let Some(sample) = inner.transport.try_recv() else { break };
@@ -457,6 +523,8 @@ impl<T: Transport + 'static> Agent<T> {
             nodes: state.replica.as_ref().map_or(0, Replica::node_count),
             edges: state.replica.as_ref().map_or(0, Replica::edge_count),
             transport: self.inner.transport.stats(),
+            join: state.timeline,
+            last_answer: *self.inner.last_answer.lock().unwrap_or_else(|p| p.into_inner()),
         }
     }
 
@@ -724,6 +792,17 @@ impl<T: Transport> Inner<T> {
         }
     }
 
+    /// Publishes messages for the endpoint `to` alone where the transport can address one (never called with the
+    /// state lock held).
+    fn send_to(&self, messages: Vec<(Channel, Message)>, to: transport::EndpointId) {
+        for (channel, message) in messages {
+            if let Err(error) = self.transport.publish_to(channel, message.encode(), to) {
+                self.publish_failures.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!("{}: publishing a {} message to {to} failed: {error}", self.me(), message.kind());
+            }
+        }
+    }
+
     fn signal(&self, changes: Vec<dsr::ChangeEvent>) {
         if changes.is_empty() {
             return;
@@ -817,6 +896,7 @@ impl<T: Transport> Inner<T> {
     }
 
     fn handle(&self, sample: Sample) {
+        let received_ns = self.clock.now_ns();
         let message = match Message::decode(&sample.bytes) {
             Ok(message) => message,
             Err(error) => return self.reject(&sample, "sample", &error),
@@ -825,7 +905,7 @@ impl<T: Transport> Inner<T> {
             return;
         }
         let me = self.me();
-        let now = self.clock.now_ns();
+        let now = received_ns;
         // Calls never touch the replica: route them without holding the state lock across the server.
         let message = match message {
             Message::CallRequest { from, call, method, args, .. } => {
@@ -839,6 +919,10 @@ impl<T: Transport> Inner<T> {
             other => other,
         };
         let mut out = Vec::new();
+        // Answers to the sample's sender (graph answers, missing deltas, snapshots): published to its endpoint alone
+        // where the transport can address one.
+        let mut replies = Vec::new();
+        let mut answer: Option<AnswerTiming> = None;
         let changes = {
             let mut state = self.lock();
             state.peers.insert(message.from(), now);
@@ -891,13 +975,13 @@ impl<T: Transport> Inner<T> {
                     let snapshot = match missing {
                         Missing::UpToDate => full.then(|| state.snapshot_bytes()).flatten(),
                         Missing::Deltas(deltas) => {
-                            out.extend(self.batches(from, &deltas));
+                            replies.extend(self.batches(from, &deltas));
                             None
                         }
                         Missing::Snapshot(_) => state.snapshot_bytes(),
                     };
                     if let Some(snapshot) = snapshot {
-                        out.push((Channel::Sync, Message::Snapshot { from: me, to: from, snapshot }));
+                        replies.push((Channel::Sync, Message::Snapshot { from: me, to: from, snapshot }));
                     }
                     Vec::new()
                 }
@@ -929,12 +1013,20 @@ impl<T: Transport> Inner<T> {
                             .answered
                             .get(&(from, nonce))
                             .is_some_and(|at| now.saturating_sub(*at) < ANSWER_HOLD_NS);
-                        if !recent && let Some(snapshot) = state.snapshot_bytes() {
+                        if !recent && let Some((snapshot, from_cache)) = state.snapshot_bytes_cached() {
                             state.answered.retain(|_, at| now.saturating_sub(*at) < ANSWER_HOLD_NS);
                             if state.answered.len() < MAX_ANSWERED {
                                 state.answered.insert((from, nonce), now);
                             }
-                            out.push((Channel::Sync, Message::GraphAnswer { from: me, to: from, nonce, snapshot }));
+                            answer = Some(AnswerTiming {
+                                to: from,
+                                request_received_ns: received_ns,
+                                snapshot_ready_ns: self.clock.now_ns(),
+                                from_cache,
+                                published_ns: 0,
+                                snapshot_bytes: snapshot.len(),
+                            });
+                            replies.push((Channel::Sync, Message::GraphAnswer { from: me, to: from, nonce, snapshot }));
                         }
                     }
                     Vec::new()
@@ -943,8 +1035,13 @@ impl<T: Transport> Inner<T> {
                     if nonce != self.nonce || state.replica.is_some() {
                         Vec::new()
                     } else {
+                        state.timeline.answer_received_ns = Some(received_ns);
+                        state.timeline.answer_bytes = snapshot.len();
                         match self.delta(&sample, "graph answer", &snapshot) {
-                            Some(snapshot) => self.join(&mut state, &sample, Some(snapshot)),
+                            Some(snapshot) => {
+                                state.timeline.decoded_ns = Some(self.clock.now_ns());
+                                self.join(&mut state, &sample, Some(snapshot))
+                            }
                             None => Vec::new(),
                         }
                     }
@@ -954,6 +1051,11 @@ impl<T: Transport> Inner<T> {
             }
         };
         self.send(out);
+        self.send_to(replies, sample.origin);
+        if let Some(mut answer) = answer {
+            answer.published_ns = self.clock.now_ns();
+            *self.last_answer.lock().unwrap_or_else(|p| p.into_inner()) = Some(answer);
+        }
         self.signal(changes);
     }
 
@@ -985,6 +1087,7 @@ impl<T: Transport> Inner<T> {
         if let Some(snapshot) = &snapshot {
             self.note_incarnations(state, snapshot.context());
         }
+        let snapshot_given = snapshot.as_ref().map(|_| ());
         let incarnation = state.incarnation_floor + 1;
         let mut replica = Replica::new(self.me().replica(incarnation));
         replica.set_log_limits(self.config.log_limits);
@@ -1013,6 +1116,9 @@ impl<T: Transport> Inner<T> {
         tracing::info!("{}: ready as replica {}", self.me(), replica.id());
         let changes = replica.drain_changes();
         state.replica = Some(replica);
+        state.timeline.ready_ns = Some(self.clock.now_ns());
+        state.timeline.alone = snapshot_given.is_none();
+        self.joined.store(true, Ordering::Relaxed);
         changes
     }
 
@@ -1030,11 +1136,19 @@ impl<T: Transport> Inner<T> {
                         Sample { channel: Channel::Sync, origin: self.transport.local_id(), bytes: Bytes::new() };
                     self.join(&mut state, &local, None)
                 } else {
+                    // A request published before discovery matched a peer reaches nobody: ask again at once when a
+                    // new match appears, besides the periodic retry.
+                    let matches = self.transport.sync_matches();
                     let due = state
                         .last_request_ns
-                        .is_none_or(|at| now.saturating_sub(at) >= self.config.join_retry.as_nanos() as u64);
+                        .is_none_or(|at| now.saturating_sub(at) >= self.config.join_retry.as_nanos() as u64)
+                        || matches != state.sync_matches_seen;
                     if due {
                         state.last_request_ns = Some(now);
+                        state.sync_matches_seen = matches;
+                        state.timeline.first_request_ns.get_or_insert(now);
+                        state.timeline.last_request_ns = Some(now);
+                        state.timeline.requests += 1;
                         out.push((Channel::Sync, Message::GraphRequest { from: me, nonce: self.nonce }));
                     }
                     Vec::new()

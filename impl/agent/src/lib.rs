@@ -42,7 +42,7 @@ pub mod agent;
 pub mod calls;
 pub mod envelope;
 
-pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, ChangeSignal};
+pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline};
 pub use calls::{CallError, CallFault, CallReplier, CallServer, PendingCall};
 
 /// A CORTEX agent id (12 bits: 0..4096).

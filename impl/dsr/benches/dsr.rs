@@ -124,7 +124,10 @@ fn snapshot_join(c: &mut Criterion) {
     group.sample_size(10);
     group.bench_function("take_snapshot", |b| b.iter(|| black_box(r.snapshot())));
     group.bench_function("encode", |b| b.iter(|| black_box(snapshot.encode())));
+    // What an agent sends a joiner: the same bytes, encoded from the replica's state without copying it.
+    group.bench_function("encode_snapshot_from_replica", |b| b.iter(|| black_box(r.encode_snapshot())));
     group.bench_function("decode", |b| b.iter(|| black_box(Delta::decode(&bytes).unwrap())));
+    // `apply` of a borrowed snapshot copies it before installing it into the fresh replica.
     group.bench_function("join_into_empty_replica", |b| {
         b.iter_batched(
             || Replica::new(ReplicaId(2)),
@@ -135,10 +138,27 @@ fn snapshot_join(c: &mut Criterion) {
             BatchSize::LargeInput,
         )
     });
+    // An agent's path: the decoded snapshot is moved in (no copy), with change tracking on (the joiner signals
+    // every inserted node, edge and attribute).
+    group.bench_function("install_owned_snapshot_with_change_tracking", |b| {
+        b.iter_batched(
+            || {
+                let mut joiner = Replica::new(ReplicaId(2));
+                joiner.set_change_tracking(true);
+                (joiner, Arc::new(Delta::decode(&bytes).unwrap()))
+            },
+            |(mut joiner, decoded)| {
+                joiner.apply_shared(decoded).unwrap();
+                let changes = joiner.drain_changes();
+                (joiner, changes)
+            },
+            BatchSize::LargeInput,
+        )
+    });
     group.bench_function("decode_and_join_end_to_end", |b| {
         b.iter(|| {
             let mut joiner = Replica::new(ReplicaId(2));
-            joiner.apply(&Delta::decode(&bytes).unwrap()).unwrap();
+            joiner.apply_shared(Arc::new(Delta::decode(&bytes).unwrap())).unwrap();
             joiner
         })
     });

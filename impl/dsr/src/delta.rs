@@ -130,12 +130,19 @@ impl Delta {
 
     /// The highest stamp of a value carried.
     pub(crate) fn max_value_stamp(&self) -> Stamp {
-        let attrs = |attrs: &Attrs| attrs.values().flat_map(|r| r.values.iter().map(|e| e.stamp)).max();
-        let nodes =
-            self.store.nodes.values().flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
-        let edges =
-            self.store.edges.values().flat_map(|e| e.presence.values.iter().map(|p| p.stamp).chain(attrs(&e.attrs)));
-        nodes.chain(edges).max().unwrap_or_default()
+        self.borrowed().max_value_stamp()
+    }
+
+    /// The delta's parts, borrowed: what encoding reads.
+    fn borrowed(&self) -> DeltaParts<'_> {
+        DeltaParts {
+            origin: self.origin,
+            complete: self.complete,
+            clock: self.clock,
+            ctx: &self.ctx,
+            applied: &self.applied,
+            store: &self.store,
+        }
     }
 
     /// Encodes the delta into a new buffer.
@@ -157,27 +164,7 @@ impl Delta {
 
     /// Appends the encoded delta to `out`.
     pub fn encode_into(&self, out: &mut Vec<u8>) {
-        let wire = to_wire(self);
-        let clock = (self.clock != self.max_value_stamp()).then(|| self.clock.0.to_le_bytes());
-        let applied: Option<WireContext> = (!self.applied.is_empty()).then(|| {
-            (
-                self.applied.version_vector().iter().map(|(r, c)| (r.0, *c)).collect(),
-                self.applied.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
-            )
-        });
-        let mut header = WIRE_VERSION << 3;
-        header |= if self.complete { FLAG_COMPLETE } else { 0 };
-        header |= if clock.is_some() { FLAG_CLOCK } else { 0 };
-        header |= if applied.is_some() { FLAG_APPLIED } else { 0 };
-        out.push(header);
-        let mut encoded = postcard::to_extend(&wire, std::mem::take(out)).expect("encoding into a Vec cannot fail");
-        if let Some(clock) = clock {
-            encoded.extend_from_slice(&clock);
-        }
-        if let Some(applied) = applied {
-            encoded = postcard::to_extend(&applied, encoded).expect("encoding into a Vec cannot fail");
-        }
-        *out = encoded;
+        self.borrowed().encode_into(out);
     }
 
     /// Decodes a delta, checking its structure.
@@ -213,6 +200,55 @@ impl Delta {
             return Err(DeltaError::Encoding(format!("{} trailing bytes after the delta", rest.len())));
         }
         from_wire(wire, header & FLAG_COMPLETE != 0, clock, applied)
+    }
+}
+
+/// The parts of a delta, borrowed: a [`Delta`] encodes through it, and a replica encodes its snapshot from its own
+/// fields through it without copying its store (`Replica::encode_snapshot`).
+#[derive(Clone, Copy)]
+pub(crate) struct DeltaParts<'a> {
+    pub(crate) origin: Option<Origin>,
+    pub(crate) complete: bool,
+    pub(crate) clock: Stamp,
+    pub(crate) ctx: &'a CausalContext,
+    pub(crate) applied: &'a CausalContext,
+    pub(crate) store: &'a Store,
+}
+
+impl DeltaParts<'_> {
+    /// The highest stamp of a value carried.
+    fn max_value_stamp(&self) -> Stamp {
+        let attrs = |attrs: &Attrs| attrs.values().flat_map(|r| r.values.iter().map(|e| e.stamp)).max();
+        let nodes =
+            self.store.nodes.values().flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
+        let edges =
+            self.store.edges.values().flat_map(|e| e.presence.values.iter().map(|p| p.stamp).chain(attrs(&e.attrs)));
+        nodes.chain(edges).max().unwrap_or_default()
+    }
+
+    /// Appends the encoded delta to `out` (the format of [`Delta::encode`]).
+    pub(crate) fn encode_into(&self, out: &mut Vec<u8>) {
+        let wire = to_wire(self);
+        let clock = (self.clock != self.max_value_stamp()).then(|| self.clock.0.to_le_bytes());
+        let applied: Option<WireContext> = (!self.applied.is_empty()).then(|| {
+            (
+                self.applied.version_vector().iter().map(|(r, c)| (r.0, *c)).collect(),
+                self.applied.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
+            )
+        });
+        let mut header = WIRE_VERSION << 3;
+        header |= if self.complete { FLAG_COMPLETE } else { 0 };
+        header |= if clock.is_some() { FLAG_CLOCK } else { 0 };
+        header |= if applied.is_some() { FLAG_APPLIED } else { 0 };
+        out.push(header);
+        let mut encoded = postcard::to_extend(&wire, std::mem::take(out)).expect("encoding into a Vec cannot fail");
+        if let Some(clock) = clock {
+            encoded.extend_from_slice(&clock);
+        }
+        if let Some(applied) = applied {
+            encoded = postcard::to_extend(&applied, encoded).expect("encoding into a Vec cannot fail");
+        }
+        *out = encoded;
     }
 }
 
@@ -287,7 +323,7 @@ fn wire_dot(dot: Dot, origin: Option<Origin>) -> WireDot {
     }
 }
 
-fn to_wire(delta: &Delta) -> WireDelta<'_> {
+fn to_wire<'d>(delta: &DeltaParts<'d>) -> WireDelta<'d> {
     let origin = delta.origin;
     let generated =
         |dot: &Dot| origin.is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter));

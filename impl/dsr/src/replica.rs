@@ -11,7 +11,7 @@ use std::sync::Arc;
 use smallvec::SmallVec;
 
 use crate::causal::CausalContext;
-use crate::delta::{Delta, Origin};
+use crate::delta::{Delta, DeltaParts, Origin};
 use crate::dictionary::{AttrKey, Dictionary, MAX_NAME_LEN};
 use crate::error::{DeltaError, DictionaryError, OpError};
 use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
@@ -677,15 +677,107 @@ impl Replica {
     /// [`DeltaError::Dictionary`] if it uses a name or type this replica's dictionary refuses; the replica is then
     /// unchanged. (Structural errors are caught by [`Delta::decode`].)
     pub fn apply(&mut self, delta: &Delta) -> Result<(), DeltaError> {
+        if self.can_install(delta) {
+            return self.install(delta.clone());
+        }
         self.apply_inner(delta, || Arc::new(delta.clone()))
     }
 
-    /// Like [`Replica::apply`], for a delta already shared: it is retained for anti-entropy without a copy.
+    /// Like [`Replica::apply`], for a delta already shared: it is retained for anti-entropy without a copy (and a
+    /// snapshot joined into a fresh replica is moved in without a copy when this is its only holder).
     ///
     /// # Errors
     /// As [`Replica::apply`].
     pub fn apply_shared(&mut self, delta: Arc<Delta>) -> Result<(), DeltaError> {
+        if self.can_install(&delta) {
+            return self.install(Arc::try_unwrap(delta).unwrap_or_else(|shared| (*shared).clone()));
+        }
         self.apply_inner(&delta, || Arc::clone(&delta))
+    }
+
+    /// Whether joining `delta` can take the fast path of [`Replica::install`]: a snapshot into a replica that has
+    /// never held anything (a late joiner's first graph), with no planted mutant (mutants live in the general
+    /// join).
+    fn can_install(&self, delta: &Delta) -> bool {
+        delta.complete
+            && delta.origin.is_none()
+            && self.plant == Plant::NONE
+            && self.ctx.is_empty()
+            && self.applied.is_empty()
+            && self.store.nodes.is_empty()
+            && self.store.edges.is_empty()
+            && self.store.tombstones.is_empty()
+            && self.log.deltas.is_empty()
+    }
+
+    /// The join of a snapshot into a replica that has never held anything ([`Replica::can_install`]), without the
+    /// general join's per-entry work: the snapshot's store is moved in and put in the form the general join would
+    /// leave (registers sorted by dot without repeated dots, tombstoned nodes and their edges dropped, empty
+    /// entries dropped), the indices are built once, and the change events are the general join's, in its order.
+    /// The result is exactly the general join's (a property test in `replica/install_tests.rs` checks state,
+    /// indices, digest, applied operations and change events).
+    fn install(&mut self, delta: Delta) -> Result<(), DeltaError> {
+        debug_assert!(self.can_install(&delta));
+        self.check_names(&delta)?;
+        if self.dictionary.allows_unknown() {
+            register_names(Arc::make_mut(&mut self.dictionary), &delta)
+                .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
+        }
+        let Delta { clock, ctx, applied, store, .. } = delta;
+        let Store { tombstones, mut nodes, mut edges } = store;
+        nodes.retain(|id, node| {
+            if tombstones.contains(id) {
+                return false;
+            }
+            normalize_register(&mut node.core);
+            normalize_attrs(&mut node.attrs);
+            !node.is_empty()
+        });
+        edges.retain(|key, edge| {
+            if tombstones.contains(&key.from) || tombstones.contains(&key.to) {
+                return false;
+            }
+            normalize_register(&mut edge.presence);
+            normalize_attrs(&mut edge.attrs);
+            !edge.is_empty()
+        });
+        self.store = Store { tombstones, nodes, edges };
+        self.ctx.merge(&ctx);
+        self.clock = self.clock.max(clock);
+        self.applied.merge(&applied);
+        let edge_keys: Vec<EdgeKey> = self.store.edges.keys().cloned().collect();
+        self.reindex_edges(&edge_keys);
+        let node_ids: Vec<NodeId> = self.store.nodes.keys().copied().collect();
+        self.reindex_names(&node_ids);
+        if self.changes.is_some() {
+            // Nothing was visible before: every visible node and edge is inserted, then every winning attribute
+            // of a visible element is updated, in the general join's order (nodes, edges, then attributes by
+            // element and name).
+            let mut events = Vec::new();
+            let mut push = |change| events.push(ChangeEvent { change, origin: None });
+            for &id in self.store.nodes.keys().filter(|id| self.node_visible(**id)) {
+                push(Change::NodeInserted { id });
+            }
+            for key in self.store.edges.keys().filter(|key| self.edge_visible(key)) {
+                push(Change::EdgeInserted { key: key.clone() });
+            }
+            for (&id, node) in self.store.nodes.iter().filter(|(id, _)| self.node_visible(**id)) {
+                for name in node.attrs.keys() {
+                    push(Change::AttrUpdated { element: Element::Node(id), name: name.clone() });
+                }
+            }
+            for (key, edge) in self.store.edges.iter().filter(|(key, _)| self.edge_visible(key)) {
+                for name in edge.attrs.keys() {
+                    push(Change::AttrUpdated { element: Element::Edge(key.clone()), name: name.clone() });
+                }
+            }
+            if let Some(queue) = self.changes.as_mut() {
+                queue.extend(events);
+            }
+        }
+        #[cfg(feature = "check-invariants")]
+        self.check_invariants().expect("invariants after installing a snapshot");
+        Ok(())
     }
 
     fn apply_inner(&mut self, delta: &Delta, shared: impl FnOnce() -> Arc<Delta>) -> Result<(), DeltaError> {
@@ -1007,6 +1099,30 @@ impl Replica {
         }
     }
 
+    /// The encoded [`Replica::snapshot`], byte for byte, made from the replica's own state without copying it
+    /// first (what an agent sends a late joiner).
+    ///
+    /// # Examples
+    /// ```
+    /// use dsr::{NewNode, Replica, ReplicaId};
+    /// let mut a = Replica::new(ReplicaId(1));
+    /// a.insert_node(10, NewNode::new("world", "world")).unwrap();
+    /// assert_eq!(a.encode_snapshot(), a.snapshot().encode());
+    /// ```
+    pub fn encode_snapshot(&self) -> Vec<u8> {
+        let parts = DeltaParts {
+            origin: None,
+            complete: true,
+            clock: self.clock,
+            ctx: &self.ctx,
+            applied: &self.applied,
+            store: &self.store,
+        };
+        let mut out = Vec::new();
+        parts.encode_into(&mut out);
+        out
+    }
+
     /// What a peer whose joined operations are `peer` (its [`Replica::applied`]) lacks: nothing, a set of retained
     /// deltas, or (when the retained history does not cover the gap) a snapshot.
     pub fn missing_for(&self, peer: &CausalContext) -> Missing {
@@ -1188,6 +1304,24 @@ impl Replica {
         }
         Ok(())
     }
+}
+
+/// Puts a register in the form the general join leaves when it joins the register into an empty one: sorted by
+/// dot, the first of repeated dots kept.
+fn normalize_register<T>(register: &mut Register<T>) {
+    if register.values.windows(2).all(|pair| pair[0].dot < pair[1].dot) {
+        return;
+    }
+    register.values.sort_by_key(|entry| entry.dot);
+    register.values.dedup_by_key(|entry| entry.dot);
+}
+
+/// [`normalize_register`] for every register; empty registers go (the general join never inserts one).
+fn normalize_attrs(attrs: &mut Attrs) {
+    attrs.retain(|_, register| {
+        normalize_register(register);
+        !register.is_empty()
+    });
 }
 
 /// Registers the names of a delta that passed [`Replica::check_names`] (only needed when unknown names are allowed).
@@ -1514,3 +1648,6 @@ impl<'a> Attributes<'a> {
         self.attrs.is_empty()
     }
 }
+
+#[cfg(test)]
+mod install_tests;

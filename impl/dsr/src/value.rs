@@ -107,7 +107,7 @@ impl fmt::Display for ValueType {
 #[derive(Clone, Serialize, Deserialize)]
 pub enum Value {
     /// UTF-8 text.
-    String(Arc<str>),
+    String(#[serde(with = "arc_str")] Arc<str>),
     /// A 32-bit signed integer.
     I32(i32),
     /// A 32-bit float.
@@ -379,6 +379,32 @@ impl From<Vec<f32>> for Value {
 impl From<Vec<u64>> for Value {
     fn from(values: Vec<u64>) -> Self {
         Value::VecU64(Arc::from(values))
+    }
+}
+
+/// `Arc<str>` as a plain string (the encoding of serde's own `Arc<str>`), decoded with one allocation: the text is
+/// copied straight into the `Arc` instead of through an intermediate `Box<str>`.
+mod arc_str {
+    use super::*;
+
+    pub fn serialize<S: serde::Serializer>(text: &Arc<str>, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(text)
+    }
+
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Arc<str>, D::Error> {
+        deserializer.deserialize_str(Visitor)
+    }
+
+    struct Visitor;
+
+    impl serde::de::Visitor<'_> for Visitor {
+        type Value = Arc<str>;
+        fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            f.write_str("a string")
+        }
+        fn visit_str<E: serde::de::Error>(self, text: &str) -> Result<Arc<str>, E> {
+            Ok(Arc::from(text))
+        }
     }
 }
 

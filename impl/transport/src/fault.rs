@@ -220,6 +220,14 @@ impl<T: Transport> Transport for FaultInjector<T> {
         self.inner.publish(channel, bytes)
     }
 
+    fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
+        self.inner.publish_to(channel, bytes, to)
+    }
+
+    fn sync_matches(&self) -> u64 {
+        self.inner.sync_matches()
+    }
+
     fn try_recv(&self) -> Option<Sample> {
         let now_ns = self.clock.now_ns();
         let mut state = self.lock();

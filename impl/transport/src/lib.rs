@@ -130,6 +130,18 @@ pub trait Transport: Send + Sync {
     /// [`TransportError`] when the sample cannot be handed to the network.
     fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError>;
 
+    /// Publishes `bytes` on `channel` for the endpoint `to` alone, when the transport can address one endpoint (RTPS:
+    /// a write directed to that participant's reader, so a large answer is not copied to every reader); otherwise,
+    /// and by default, to every other endpoint like [`Transport::publish`]. Receivers must therefore still check
+    /// whom a sample is for (the agent envelope names it).
+    ///
+    /// # Errors
+    /// As [`Transport::publish`].
+    fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
+        let _ = to;
+        self.publish(channel, bytes)
+    }
+
     /// The next received sample, if one is waiting.
     fn try_recv(&self) -> Option<Sample>;
 
@@ -138,6 +150,14 @@ pub trait Transport: Send + Sync {
 
     /// Counters of what went through this endpoint.
     fn stats(&self) -> TransportStats;
+
+    /// A number that grows whenever discovery matches this endpoint with a new remote endpoint on
+    /// [`Channel::Sync`] (a peer that can now hear, or be heard on, the channel of graph requests and answers).
+    /// Transports without discovery return 0 forever. A joining agent repeats its graph request when it grows,
+    /// rather than waiting for its retry period: a request published before the match reaches nobody.
+    fn sync_matches(&self) -> u64 {
+        0
+    }
 }
 
 impl<T: Transport + ?Sized> Transport for Arc<T> {
@@ -147,6 +167,9 @@ impl<T: Transport + ?Sized> Transport for Arc<T> {
     fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
         (**self).publish(channel, bytes)
     }
+    fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
+        (**self).publish_to(channel, bytes, to)
+    }
     fn try_recv(&self) -> Option<Sample> {
         (**self).try_recv()
     }
@@ -155,6 +178,9 @@ impl<T: Transport + ?Sized> Transport for Arc<T> {
     }
     fn stats(&self) -> TransportStats {
         (**self).stats()
+    }
+    fn sync_matches(&self) -> u64 {
+        (**self).sync_matches()
     }
 }
 

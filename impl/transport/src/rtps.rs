@@ -37,13 +37,23 @@
 //! on `lo`). [`Multicast::Auto`], the default, does so exactly when the loopback interface is up and
 //! multicast-capable ([`loopback_multicast_capable`]).
 //!
+//! A sample meant for one peer ([`Transport::publish_to`], e.g. a graph answer) is written to that participant's
+//! reader alone (a directed write; the other readers get a GAP for its sequence number), so a multi-megabyte answer
+//! is not copied to every reader — including this participant's own reader, which rustdds matches too.
+//!
+//! Discovery is observed through the participant's status events: [`RtpsTransport::discovery`] tells when the
+//! first remote participant was discovered and when each channel's writer and reader matched their first remote
+//! endpoint, and [`Transport::sync_matches`] counts the matches on [`Channel::Sync`] so a joining agent can ask for
+//! the graph as soon as a peer can hear it. (rustdds sends a new participant's first discovery announcement 100 ms
+//! after it is created — a constant of rustdds 0.15, not a setting — so no peer is found sooner than that.)
+//!
 //! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B), the RTPS DATA and
 //! INFO_TS submessages (36 B), and one RTPS header plus UDP/IPv4 header (48 B) per datagram of up to 64 KiB;
 //! acknowledgements and heartbeats are not seen by this layer, and the estimate counts one copy per sample
 //! whatever the number of readers. Exact socket-level figures come from a measurement in a fresh network
 //! namespace (`measure::netns`, `cortex bench rtt|fanout`).
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -53,11 +63,91 @@ use crossbeam_channel::{Receiver, SendTimeoutError, Sender, bounded};
 use rustdds::no_key::{DataWriter, Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter, SimpleDataReader};
 use rustdds::policy::{Durability, History, Reliability, ResourceLimits};
 use rustdds::{
-    DomainParticipant, DomainParticipantBuilder, QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier,
-    TopicKind,
+    DomainParticipant, DomainParticipantBuilder, DomainParticipantStatusEvent, DomainParticipantStatusListener, GUID,
+    QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, StatusEvented, TopicKind, WriteOptionsBuilder,
 };
 
-use crate::{Channel, Counters, EndpointId, Sample, Transport, TransportError, TransportStats};
+use crate::{Channel, Clock, Counters, EndpointId, Sample, SystemClock, Transport, TransportError, TransportStats};
+
+/// When discovery reached each step, in wall-clock nanoseconds since the Unix epoch ([`SystemClock`], so times of
+/// different processes on one host compare); `None` until it happens.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DiscoveryTimes {
+    /// The participant, its topics, writers and readers were created.
+    pub created_ns: u64,
+    /// The first remote participant was discovered.
+    pub first_participant_ns: Option<u64>,
+    /// Per channel (by [`Channel::index`]): this participant's writer matched its first remote reader.
+    pub writer_matched_ns: [Option<u64>; 3],
+    /// Per channel (by [`Channel::index`]): this participant's reader matched its first remote writer.
+    pub reader_matched_ns: [Option<u64>; 3],
+}
+
+/// Most remote readers remembered per channel for directed writes; past it, [`Transport::publish_to`] of an
+/// unremembered peer falls back to a write to every reader.
+const MAX_REMEMBERED_READERS: usize = 4096;
+
+/// A participant's GUID prefix (the first 12 bytes of every GUID of its entities).
+type Prefix = [u8; 12];
+
+/// The GUID prefix of `guid`.
+fn prefix_of(guid: GUID) -> Prefix {
+    let bytes = guid.to_bytes();
+    let mut prefix = [0; 12];
+    prefix.copy_from_slice(&bytes[..12]);
+    prefix
+}
+
+/// First 8 bytes of a transport's own control sample on the `Sync` topic, which tells peers the GUID prefix of
+/// its readers' participant (12 bytes follow). Samples are tagged with the writing participant's prefix, and the
+/// readers live in another participant, so without it a peer could not address this transport's reader alone.
+/// The receiving thread consumes these samples; they never reach the inbox.
+const READERS_AT: [u8; 8] = *b"\xffRTPSrd1";
+
+/// What the receiving thread learns from discovery, shared with the transport.
+#[derive(Debug, Default)]
+struct DiscoveryState {
+    times: Mutex<DiscoveryTimes>,
+    sync_matches: AtomicU64,
+    /// The remote readers each channel's writer has matched (by [`Channel::index`]), for directed writes.
+    readers: Mutex<[Vec<GUID>; 3]>,
+    /// Peers' readers' participants, learnt from their [`READERS_AT`] samples (bounded).
+    reading_prefixes: Mutex<Vec<(EndpointId, Prefix)>>,
+    /// A new remote reader matched this transport's sync writer: tell it where this transport's readers are,
+    /// before the next sample this transport publishes.
+    announce_pending: AtomicBool,
+}
+
+impl DiscoveryState {
+    /// A matched remote reader of `channel` of the transport `to`.
+    fn reader_of(&self, channel: Channel, to: EndpointId) -> Option<GUID> {
+        let prefix = self
+            .reading_prefixes
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .find(|(peer, _)| *peer == to)
+            .map(|(_, prefix)| *prefix);
+        let readers = self.readers.lock().unwrap_or_else(|p| p.into_inner());
+        readers[channel.index()]
+            .iter()
+            .copied()
+            .find(|guid| prefix.map_or_else(|| endpoint_of(*guid) == to, |prefix| prefix_of(*guid) == prefix))
+    }
+
+    /// Records a peer's [`READERS_AT`] sample; `false` if `bytes` is not one.
+    fn learn_reading_prefix(&self, origin: EndpointId, bytes: &[u8]) -> bool {
+        let Some(prefix) = bytes.strip_prefix(&READERS_AT).and_then(|rest| <[u8; 12]>::try_from(rest).ok()) else {
+            return false;
+        };
+        let mut known = self.reading_prefixes.lock().unwrap_or_else(|p| p.into_inner());
+        known.retain(|(peer, _)| *peer != origin);
+        if known.len() < MAX_REMEMBERED_READERS {
+            known.push((origin, prefix));
+        }
+        true
+    }
+}
 
 /// Whether user data to several same-host readers goes out once, as multicast (see the module documentation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -253,8 +343,11 @@ pub struct RtpsTransport {
     counters: Arc<Counters>,
     local: EndpointId,
     unpaced_large_bytes: AtomicUsize,
+    discovery: Arc<DiscoveryState>,
     config: RtpsConfig,
     multicast: bool,
+    /// The GUID prefix of the participant holding this transport's readers (told to peers, see [`READERS_AT`]).
+    reading_prefix: Prefix,
     _publishing: DomainParticipant,
     /// The readers' own participant (see [`RtpsTransport::new`]); `None` only when neither
     /// `separate_reader_participant` nor multicast asks for it.
@@ -318,6 +411,7 @@ impl RtpsTransport {
             subscribing.as_ref().unwrap_or(&publishing).create_subscriber(&qos).map_err(setup("subscriber"))?;
         let mut writers = Vec::new();
         let mut readers = Vec::new();
+        let mut endpoints = Vec::new();
         for channel in Channel::ALL {
             let name = format!("{}_{}", config.topic_prefix, channel.name());
             let topic = |participant: &DomainParticipant| {
@@ -336,20 +430,30 @@ impl RtpsTransport {
             let reader = subscriber
                 .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&read, Some(qos.clone()))
                 .map_err(setup(format!("reader of {name}")))?;
+            endpoints.push((channel, writer.guid(), reader.guid()));
             writers.push(Mutex::new(writer));
             readers.push((channel, reader));
         }
         // Samples are tagged with their writer's GUID prefix: the publishing participant's.
         let local = endpoint_of(publishing.guid());
+        let discovery = Arc::new(DiscoveryState::default());
+        discovery.times.lock().unwrap_or_else(|p| p.into_inner()).created_ns = SystemClock.now_ns();
+        // Discovery events of both participants: the writers' matches come from the publishing one, the readers'
+        // from the subscribing one.
+        let mut statuses = vec![publishing.status_listener()];
+        statuses.extend(subscribing.as_ref().map(DomainParticipant::status_listener));
+        let reading_prefix = prefix_of(subscribing.as_ref().unwrap_or(&publishing).guid());
         let (sender, inbox) = bounded(config.inbox_capacity.max(1));
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(Counters::default());
         let receiver = {
             let stop = Arc::clone(&stop);
             let counters = Arc::clone(&counters);
+            let own = vec![prefix_of(publishing.guid()), reading_prefix];
+            let watch = DiscoveryWatch { statuses, own, endpoints, state: Arc::clone(&discovery) };
             std::thread::Builder::new()
                 .name("rtps-receive".into())
-                .spawn(move || receive_loop(readers, sender, stop, counters, local))
+                .spawn(move || receive_loop(readers, watch, sender, stop, counters, local))
                 .map_err(|e| TransportError::Setup { what: "receiving thread".into(), detail: e.to_string() })?
         };
         Ok(RtpsTransport {
@@ -360,8 +464,10 @@ impl RtpsTransport {
             counters,
             local,
             unpaced_large_bytes: AtomicUsize::new(0),
+            discovery,
             config,
             multicast,
+            reading_prefix,
             _publishing: publishing,
             _subscribing: subscribing,
         })
@@ -376,6 +482,86 @@ impl RtpsTransport {
     pub fn multicast(&self) -> bool {
         self.multicast
     }
+
+    /// When discovery found the first peer and matched each channel's writer and reader (see [`DiscoveryTimes`]).
+    pub fn discovery(&self) -> DiscoveryTimes {
+        *self.discovery.times.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// The receiving thread's view of discovery: the participant's status events, and which local writer and reader
+/// serve which channel.
+struct DiscoveryWatch {
+    /// The status events of the transport's participants (one or two).
+    statuses: Vec<DomainParticipantStatusListener>,
+    /// The GUID prefixes of this transport's participants: rustdds also matches a transport's writers with its own
+    /// readers (in the same participant or the other), which is no peer.
+    own: Vec<Prefix>,
+    endpoints: Vec<(Channel, GUID, GUID)>,
+    state: Arc<DiscoveryState>,
+}
+
+impl DiscoveryWatch {
+    /// Records the status events waiting (a bounded number per call, so data is never starved).
+    fn drain(&self) {
+        for status in &self.statuses {
+            self.drain_one(status);
+        }
+    }
+
+    fn drain_one(&self, status: &DomainParticipantStatusListener) {
+        for _ in 0..256 {
+            let Some(event) = status.try_recv_status() else { return };
+            let now = SystemClock.now_ns();
+            let mut times = self.state.times.lock().unwrap_or_else(|p| p.into_inner());
+            match event {
+                DomainParticipantStatusEvent::ParticipantDiscovered { dpd }
+                    if !self.own.contains(&prefix_of(dpd.guid)) =>
+                {
+                    times.first_participant_ns.get_or_insert(now);
+                }
+                DomainParticipantStatusEvent::RemoteReaderMatched { local_writer, remote_reader }
+                    if !self.own.contains(&prefix_of(remote_reader)) =>
+                {
+                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, w, _)| *w == local_writer) {
+                        times.writer_matched_ns[channel.index()].get_or_insert(now);
+                        let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                        let known = &mut readers[channel.index()];
+                        if !known.contains(&remote_reader) && known.len() < MAX_REMEMBERED_READERS {
+                            known.push(remote_reader);
+                        }
+                        if *channel == Channel::Sync {
+                            self.state.sync_matches.fetch_add(1, Ordering::Release);
+                            self.state.announce_pending.store(true, Ordering::Release);
+                        }
+                    }
+                }
+                DomainParticipantStatusEvent::RemoteWriterMatched { local_reader, remote_writer }
+                    if !self.own.contains(&prefix_of(remote_writer)) =>
+                {
+                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, _, r)| *r == local_reader) {
+                        times.reader_matched_ns[channel.index()].get_or_insert(now);
+                        if *channel == Channel::Sync {
+                            self.state.sync_matches.fetch_add(1, Ordering::Release);
+                        }
+                    }
+                }
+                DomainParticipantStatusEvent::ReaderLost { guid, .. } => {
+                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                    for known in readers.iter_mut() {
+                        known.retain(|reader| *reader != guid);
+                    }
+                }
+                DomainParticipantStatusEvent::ParticipantLost { id, .. } => {
+                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                    for known in readers.iter_mut() {
+                        known.retain(|reader| reader.prefix != id);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
 }
 
 impl Drop for RtpsTransport {
@@ -389,6 +575,7 @@ impl Drop for RtpsTransport {
 
 fn receive_loop(
     mut readers: Vec<(Channel, Reader)>,
+    mut watch: DiscoveryWatch,
     sender: Sender<Sample>,
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
@@ -408,6 +595,14 @@ fn receive_loop(
             return;
         }
     }
+    for (i, status) in watch.statuses.iter_mut().enumerate() {
+        if let Err(error) =
+            poll.registry().register(status.as_status_source_mio1(), Token(readers.len() + i), Interest::READABLE)
+        {
+            // Discovery times stay unknown and joiners fall back to their retry period; data still flows.
+            tracing::warn!("rtps receive: cannot watch discovery events: {error}");
+        }
+    }
     let mut events = Events::with_capacity(16);
     while !stop.load(Ordering::Relaxed) {
         if let Err(error) = poll.poll(&mut events, Some(Duration::from_millis(20)))
@@ -416,6 +611,7 @@ fn receive_loop(
             tracing::error!("rtps receive: poll failed: {error}");
             std::thread::sleep(Duration::from_millis(5));
         }
+        watch.drain();
         // Take from every reader each round: a notification may have been drained by an earlier round.
         for (channel, reader) in &readers {
             reader.drain_read_notifications();
@@ -427,6 +623,9 @@ fn receive_loop(
                             continue;
                         }
                         let Payload(bytes) = change.into_value();
+                        if *channel == Channel::Sync && watch.state.learn_reading_prefix(origin, &bytes) {
+                            continue;
+                        }
                         let mut sample = Sample { channel: *channel, origin, bytes };
                         // Bounded inbox: wait (back-pressure) but notice a stop request.
                         loop {
@@ -461,6 +660,47 @@ impl Transport for RtpsTransport {
     }
 
     fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
+        self.write(channel, bytes, None)
+    }
+
+    fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
+        // A peer whose reader discovery has not reported yet gets the sample like everyone else.
+        let reader = self.discovery.reader_of(channel, to);
+        self.write(channel, bytes, reader)
+    }
+
+    fn try_recv(&self) -> Option<Sample> {
+        self.counters.take(&self.inbox, None)
+    }
+
+    fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
+        self.counters.take(&self.inbox, Some(timeout))
+    }
+
+    fn stats(&self) -> TransportStats {
+        self.counters.snapshot()
+    }
+
+    fn sync_matches(&self) -> u64 {
+        self.discovery.sync_matches.load(Ordering::Acquire)
+    }
+}
+
+impl RtpsTransport {
+    /// Writes one sample to every matched reader of `channel`, or to `reader` alone (the others are told, by a GAP,
+    /// that the sequence number is not for them), with back-pressure and pacing of large samples.
+    fn write(&self, channel: Channel, bytes: Bytes, reader: Option<GUID>) -> Result<(), TransportError> {
+        if self.discovery.announce_pending.swap(false, Ordering::AcqRel) {
+            // Before this sample: peers that matched since the last one learn where this transport's readers are
+            // (a peer answering a request in this sample can then address the reply to them alone).
+            let mut announce = READERS_AT.to_vec();
+            announce.extend_from_slice(&self.reading_prefix);
+            self.write_sample(Channel::Sync, Bytes::from(announce), None)?;
+        }
+        self.write_sample(channel, bytes, reader)
+    }
+
+    fn write_sample(&self, channel: Channel, bytes: Bytes, reader: Option<GUID>) -> Result<(), TransportError> {
         let size = bytes.len();
         if size > self.config.max_sample_bytes {
             return Err(TransportError::TooLarge {
@@ -473,7 +713,13 @@ impl Transport for RtpsTransport {
         let deadline = Instant::now() + self.config.max_blocking * 4;
         let payload = Payload(bytes);
         loop {
-            match writer.write(payload.clone(), None) {
+            let written = match reader {
+                Some(reader) => writer
+                    .write_with_options(payload.clone(), WriteOptionsBuilder::new().to_single_reader(reader).build())
+                    .map(|_| ()),
+                None => writer.write(payload.clone(), None),
+            };
+            match written {
                 Ok(()) => break,
                 Err(rustdds::dds::result::WriteError::WouldBlock { .. }) if Instant::now() < deadline => {
                     // The send window is full: back-pressure. Give acknowledgements a chance, then retry.
@@ -493,18 +739,6 @@ impl Transport for RtpsTransport {
         }
         self.counters.sent(size, estimated_wire_bytes(size));
         Ok(())
-    }
-
-    fn try_recv(&self) -> Option<Sample> {
-        self.counters.take(&self.inbox, None)
-    }
-
-    fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
-        self.counters.take(&self.inbox, Some(timeout))
-    }
-
-    fn stats(&self) -> TransportStats {
-        self.counters.snapshot()
     }
 }
 

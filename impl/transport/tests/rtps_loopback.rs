@@ -109,3 +109,53 @@ fn fragmented_sensor_samples_arrive_complete_and_in_order() {
     assert_eq!(received, (0..n).collect::<Vec<_>>(), "every sample, once, in order");
     assert!(a.try_recv().is_none(), "a transport never receives its own samples");
 }
+
+/// Waits (bounded) until `a`'s discovery has matched `n` remote endpoints on the sync channel.
+fn wait_for_sync_matches(a: &RtpsTransport, n: u64) {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while a.sync_matches() < n {
+        assert!(Instant::now() < deadline, "only {} sync matches within 20 s, {n} expected", a.sync_matches());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn a_directed_sample_reaches_its_peer_alone_and_discovery_is_timed() {
+    let prefix = format!("d{}", std::process::id());
+    let a = RtpsTransport::new(config(&prefix)).unwrap();
+    let b = RtpsTransport::new(config(&prefix)).unwrap();
+    let c = RtpsTransport::new(config(&prefix)).unwrap();
+    // b's and c's sync readers and writers: four matches, none of them a's own reader and writer.
+    wait_for_sync_matches(&a, 4);
+    let times = a.discovery();
+    let sync = Channel::Sync.index();
+    let first_peer = times.first_participant_ns.expect("a peer was discovered");
+    assert!(first_peer >= times.created_ns);
+    assert!(times.writer_matched_ns[sync].is_some_and(|t| t >= times.created_ns));
+    assert!(times.reader_matched_ns[sync].is_some_and(|t| t >= times.created_ns));
+
+    let next_sync = |t: &RtpsTransport| {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while Instant::now() < deadline {
+            if let Some(sample) = t.recv_timeout(Duration::from_millis(100))
+                && sample.channel == Channel::Sync
+            {
+                return sample.bytes;
+            }
+        }
+        panic!("no sync sample within 20 s");
+    };
+    // b's readers live in its second participant: a learns where from the control sample b's transport sends
+    // before its first sample after a match (here a request, as a joining agent's would be). The control sample
+    // itself reaches no inbox.
+    b.publish(Channel::Sync, Bytes::from_static(b"request from b")).unwrap();
+    assert_eq!(next_sync(&a), Bytes::from_static(b"request from b"));
+    assert_eq!(next_sync(&c), Bytes::from_static(b"request from b"));
+
+    // Per writer, samples arrive in order: c seeing "everyone" first proves it was never sent "for b".
+    a.publish_to(Channel::Sync, Bytes::from_static(b"for b"), b.local_id()).unwrap();
+    a.publish(Channel::Sync, Bytes::from_static(b"everyone")).unwrap();
+    assert_eq!(next_sync(&b), Bytes::from_static(b"for b"));
+    assert_eq!(next_sync(&b), Bytes::from_static(b"everyone"));
+    assert_eq!(next_sync(&c), Bytes::from_static(b"everyone"), "a sample directed to b went to c too");
+}
