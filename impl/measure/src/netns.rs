@@ -10,7 +10,8 @@
 //! processes counts once and eight unicast copies count eight times.
 //!
 //! [`reexec_in_fresh_netns`] runs a command under `unshare --net` after bringing `lo` up (and, for
-//! [`NetnsSetup::multicast`], `ip link set lo multicast on` and `ip route add 224.0.0.0/4 dev lo`), with
+//! [`NetnsSetup::multicast`], `ip link set lo multicast on`, `ip route add 224.0.0.0/4 dev lo` and a non-loopback
+//! unicast address, `198.18.0.1/32` on `lo`: see [`NetnsSetup::multicast`]), with
 //! [`NETNS_ENV`] set so the command knows where it runs ([`inside`]). [`probe`] says why a namespace cannot be
 //! made (not root, `unshare` or `ip` missing, the kernel refused), so a caller can fall back to estimates and say
 //! so. [`LoopbackCounters::read`] reads the namespace's own counters from `/proc/self/net/dev`
@@ -26,7 +27,14 @@ pub const NETNS_ENV: &str = "CORTEX_NETNS";
 /// How the loopback interface of a fresh namespace is set up.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NetnsSetup {
-    /// Multicast on `lo` (`ip link set lo multicast on`, route 224.0.0.0/4 via `lo`).
+    /// Multicast on `lo` (`ip link set lo multicast on`, route 224.0.0.0/4 via `lo`), and a non-loopback unicast
+    /// address on `lo` (198.18.0.1/32, the benchmarking range), as every networked host has one. Without it a
+    /// participant advertises only 127.0.0.1, which `rustdds` never picks as a unicast route when its same-host
+    /// loopback preference is off (multicast on), so every message meant for *one* reader — repairs of lost
+    /// fragments, GAPs, per-reader heartbeats — goes to the multicast group and is read and parsed by every
+    /// participant in the namespace. One lagging receiver then loads all the others, and with 15 receiver
+    /// processes on 2 cores that feedback collapsed the `rtps-processes` runs (socket receive-buffer overflows,
+    /// hundreds of thousands of repair datagrams, image latency of seconds).
     pub multicast: bool,
 }
 
@@ -38,7 +46,8 @@ impl NetnsSetup {
     /// The shell commands that set up `lo` inside the namespace before the measured command runs.
     fn script(self) -> &'static str {
         if self.multicast {
-            "set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo; exec \"$@\""
+            "set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo; \
+             ip addr add 198.18.0.1/32 dev lo; exec \"$@\""
         } else {
             "set -e; ip link set lo up; exec \"$@\""
         }
