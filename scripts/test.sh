@@ -17,9 +17,12 @@ fi
 cargo test --workspace --all-targets
 # The RTPS tests once more in a fresh network namespace whose loopback is multicast-capable, where
 # `RtpsConfig::multicast` (default `Auto`) turns multicast on (two participants per transport, one datagram for all
-# same-host readers). The bench tests in harness/tests/bench_netns.rs make their own namespaces.
+# same-host readers), plus a non-loopback address on lo as any networked host has (rustdds never routes unicast to
+# a reader that advertises only 127.0.0.1, so per-reader repairs would go to the whole group; measure::netns does the
+# same). The bench tests in harness/tests/bench_netns.rs make their own namespaces.
 if [ "$(id -u)" = 0 ] && command -v unshare >/dev/null && command -v ip >/dev/null; then
   unshare --net -- sh -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
+    ip addr add 198.18.0.1/32 dev lo
     exec "$@"' sh \
     cargo test --offline -p transport -p agent -p harness \
       --test rtps_loopback --test calls --test agents_multiprocess --test agents_roles
