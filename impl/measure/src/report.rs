@@ -208,7 +208,7 @@ pub fn write(results: &Results, out: &Path) -> anyhow::Result<()> {
     }
 
     let runs = crate::record::write_runs(results, out)?;
-    std::fs::write(out.join("report.md"), markdown(results, &runs)).context("cannot write report.md")?;
+    std::fs::write(out.join("report.md"), markdown(results, &runs, out)).context("cannot write report.md")?;
     Ok(())
 }
 
@@ -231,7 +231,7 @@ fn figure(md: &mut String, stem: &str, alt: &str) {
     let _ = writeln!(md, "![{alt}]({stem}.svg)\n\n(also [{stem}.png]({stem}.png))\n");
 }
 
-fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
+fn markdown(r: &Results, runs: &[crate::record::RecordedRun], out: &Path) -> String {
     let p = &r.provenance;
     let mut md = String::new();
     let _ = writeln!(md, "# Performance report: {} ({})\n", r.experiment, r.mode);
@@ -599,7 +599,11 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun]) -> String {
         "One MCAP file per run, to open in Foxglove (or read with the `mcap` tools): per-write latencies \
          (`/metrics/latency`), convergence windows (`/metrics/convergence`), published bytes per 100 ms \
          (`/metrics/bandwidth`) and the run's summary (`/metrics/summary`), each a JSON-schema channel; times are ns \
-         on the run's clock. The graph deltas of a replayed log are recorded by `cortex replay FILE --out DIR`.\n"
+         on the run's clock. The graph deltas of a replayed log are recorded by `cortex replay FILE --out DIR`. \
+         Together they take {:.0} MB here, so the copy of a report committed to the repository leaves `runs/` out \
+         (`.gitignore`): regenerate the report to get them.\n",
+        runs.iter().filter_map(|run| std::fs::metadata(out.join(&run.path)).ok()).map(|m| m.len()).sum::<u64>() as f64
+            / 1e6
     );
     let _ = writeln!(md, "| run | file | latency messages | convergence messages |\n|---|---|---:|---:|");
     for run in runs {
