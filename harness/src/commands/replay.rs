@@ -484,8 +484,16 @@ fn text(s: &Summary) -> String {
     for error in &b.first_errors {
         let _ = writeln!(out, "    {error}");
     }
-    let _ =
-        writeln!(out, "  deltas        {} ({} bytes encoded), {} deliveries", s.deltas, s.delta_bytes, s.deliveries);
+    let _ = if s.transport == "rtps" {
+        // Over RTPS the bridge agent's counters: its deltas, and its announces and re-sends meanwhile.
+        writeln!(
+            out,
+            "  deltas        {} ({} bytes the bridge agent published during the replay), {} samples received by the others",
+            s.deltas, s.delta_bytes, s.deliveries
+        )
+    } else {
+        writeln!(out, "  deltas        {} ({} bytes encoded), {} deliveries", s.deltas, s.delta_bytes, s.deliveries)
+    };
     for a in &s.agent_reports {
         let _ = writeln!(
             out,
