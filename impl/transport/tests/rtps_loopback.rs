@@ -148,6 +148,9 @@ fn a_directed_sample_reaches_its_peer_alone_and_discovery_is_timed() {
     // b's readers live in its second participant: a learns where from the control sample b's transport sends
     // before its first sample after a match (here a request, as a joining agent's would be). The control sample
     // itself reaches no inbox.
+    // (VOLATILE: b's writer must have matched a's and c's readers itself, or its sample is not for them.)
+    wait_for_sync_matches(&b, 4);
+    wait_for_sync_matches(&c, 4);
     b.publish(Channel::Sync, Bytes::from_static(b"request from b")).unwrap();
     assert_eq!(next_sync(&a), Bytes::from_static(b"request from b"));
     assert_eq!(next_sync(&c), Bytes::from_static(b"request from b"));
