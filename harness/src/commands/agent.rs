@@ -293,12 +293,8 @@ fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> s
 pub struct Played {
     /// The bridge's counters.
     pub bridge: replay::BridgeStats,
-    /// Messages paced (all loops).
-    pub messages: u64,
-    /// Payload bytes of those messages.
-    pub bytes: u64,
-    /// Deltas the bridge wrote (each published by the agent).
-    pub deltas: u64,
+    /// Messages, bytes, deltas (each published by the agent) and loops, as the in-process replay counts them.
+    pub drive: replay::inproc::DriveStats,
 }
 
 /// The `bridge` role: paces `log` on the monotonic clock and writes each message into the agent's graph through
@@ -329,13 +325,14 @@ pub fn play_log(
             }
             std::thread::sleep(Duration::from_nanos(item.due_ns - now).min(Duration::from_millis(50)));
         }
-        played.messages += 1;
-        played.bytes += item.message.data.len() as u64;
+        played.drive.messages += 1;
+        played.drive.bytes += item.message.data.len() as u64;
+        played.drive.loops = played.drive.loops.max(item.loop_index + 1);
         let deltas = agent.update(|replica, now_ns| {
             let deltas = bridge.ingest(replica, now_ns, item.message, item.shift_ns);
             (deltas.clone(), deltas)
         })?;
-        played.deltas += deltas.len() as u64;
+        played.drive.deltas += deltas.len() as u64;
         on_deltas(&deltas)?;
     }
     played.bridge = bridge.stats().clone();

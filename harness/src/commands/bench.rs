@@ -352,6 +352,22 @@ struct LoopCounts {
     estimated_wire_bytes: u64,
 }
 
+impl LoopCounts {
+    /// Counts the answer to ping `seq` sent at `sent` (`got`: it came in time); past the warm-up, its round trip
+    /// goes into `histogram`, or it counts as lost.
+    fn answered(&mut self, seq: u64, got: bool, sent: Instant, histogram: &mut Histogram<u64>) -> Result<()> {
+        self.pongs += u64::from(got);
+        if seq >= u64::from(WARMUP) {
+            if got {
+                histogram.record(sent.elapsed().as_micros() as u64)?;
+            } else {
+                self.lost += 1;
+            }
+        }
+        Ok(())
+    }
+}
+
 fn figures(histogram: &Histogram<u64>, counts: &LoopCounts, socket: Option<SocketFigures>) -> RttFigures {
     RttFigures {
         count: histogram.len(),
@@ -502,14 +518,7 @@ fn rtt_raw(args: &RttArgs, period: Duration, counting: &Counting) -> Result<RttF
                 break;
             }
         }
-        counts.pongs += u64::from(got);
-        if seq >= u64::from(WARMUP) {
-            if got {
-                histogram.record(sent.elapsed().as_micros() as u64)?;
-            } else {
-                counts.lost += 1;
-            }
-        }
+        counts.answered(seq, got, sent, &mut histogram)?;
         next += period;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
@@ -584,14 +593,7 @@ fn rtt_agent(args: &RttArgs, period: Duration, counting: &Counting) -> Result<Rt
                 break;
             }
         }
-        counts.pongs += u64::from(got);
-        if seq >= u64::from(WARMUP) {
-            if got {
-                histogram.record(sent.elapsed().as_micros() as u64)?;
-            } else {
-                counts.lost += 1;
-            }
-        }
+        counts.answered(seq, got, sent, &mut histogram)?;
         next += period;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }

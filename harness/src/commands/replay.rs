@@ -351,31 +351,51 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         }
     };
     let summary = Summary {
+        delta_bytes: stats.encoded_bytes,
+        deliveries: stats.deliveries,
+        digests: digest_strings,
+        digests_equal,
+        recording,
+        ..summary(&args, &log, "inproc", &driven, seconds, bridge.stats().clone())
+    };
+    finish(&args, &summary)
+}
+
+/// The part of a summary both transports fill alike; what differs (bytes, deliveries, digests, agents,
+/// recording) is set by the caller.
+fn summary(
+    args: &Resolved,
+    log: &Log,
+    transport: &'static str,
+    drive: &inproc::DriveStats,
+    seconds: f64,
+    bridge: BridgeStats,
+) -> Summary {
+    Summary {
         file: args.file.display().to_string(),
-        transport: "inproc",
+        transport,
         agents: args.agents,
         rate: rate_text(args.rate),
         loops: args.loops,
         file_bytes: log.file_bytes,
         damage: log.damage.as_ref().map(ToString::to_string),
         unread_bytes: log.unread_bytes,
-        messages: driven.messages,
-        payload_bytes: driven.bytes,
+        messages: drive.messages,
+        payload_bytes: drive.bytes,
         seconds,
-        messages_per_second: driven.messages as f64 / seconds.max(1e-9),
-        megabytes_per_second: driven.bytes as f64 / 1e6 / seconds.max(1e-9),
-        bridge: bridge.stats().clone(),
-        deltas: driven.deltas,
-        delta_bytes: stats.encoded_bytes,
-        deliveries: stats.deliveries,
-        digests: digest_strings,
-        digests_equal,
+        messages_per_second: drive.messages as f64 / seconds.max(1e-9),
+        megabytes_per_second: drive.bytes as f64 / 1e6 / seconds.max(1e-9),
+        bridge,
+        deltas: drive.deltas,
+        delta_bytes: 0,
+        deliveries: 0,
+        digests: Vec::new(),
+        digests_equal: false,
         faults: None,
         agent_reports: Vec::new(),
         converged_ms: None,
-        recording,
-    };
-    finish(&args, &summary)
+        recording: None,
+    }
 }
 
 fn rate_text(rate: Rate) -> String {
@@ -415,23 +435,7 @@ fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
     };
     let options = BridgeOptions { topics: args.topics.clone(), opaque: args.opaque };
     let outcome = super::replay_rtps::replay(log, options, args.rate, args.loops, &config)?;
-    let played = &outcome.played;
     let summary = Summary {
-        file: args.file.display().to_string(),
-        transport: "rtps",
-        agents: args.agents,
-        rate: rate_text(args.rate),
-        loops: args.loops,
-        file_bytes: log.file_bytes,
-        damage: log.damage.as_ref().map(ToString::to_string),
-        unread_bytes: log.unread_bytes,
-        messages: played.messages,
-        payload_bytes: played.bytes,
-        seconds: outcome.seconds,
-        messages_per_second: played.messages as f64 / outcome.seconds.max(1e-9),
-        megabytes_per_second: played.bytes as f64 / 1e6 / outcome.seconds.max(1e-9),
-        bridge: played.bridge.clone(),
-        deltas: played.deltas,
         delta_bytes: outcome.bridge_bytes,
         deliveries: outcome.agents.iter().skip(1).map(|a| a.samples_received).sum(),
         digests: outcome.agents.iter().map(|a| a.digest.clone()).collect(),
@@ -445,6 +449,7 @@ fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
             latency: None,
             convergence: None,
         }),
+        ..summary(args, log, "rtps", &outcome.played.drive, outcome.seconds, outcome.played.bridge.clone())
     };
     finish(args, &summary)
 }

@@ -48,8 +48,9 @@ pub mod run;
 pub mod timeline;
 pub mod workload;
 
-/// Version of the JSON result schema written by `cortex report` (`results.json`).
-pub const SCHEMA_VERSION: u32 = 1;
+/// Version of the JSON result schema written by `cortex report` (`results.json`). 2: a run's `source_cpu_ns` and
+/// `receiver_cpu_ns` are gone, `agent_costs` (CPU and memory per agent, the source first) holds them.
+pub const SCHEMA_VERSION: u32 = 2;
 
 pub use clock::MonoClock;
 pub use latency::{LatencyRecorder, PayloadClass, Percentiles};

@@ -276,7 +276,6 @@ pub(crate) fn run(workload: &Workload, config: &RunConfig, domain_id: u16) -> an
             applied_at: report.applied_at,
             refused: report.refused,
             stats: report.stats,
-            cpu_ns: report.cpu_ns,
             digest: Digest(report.digest),
             probe_bytes: report.probe_bytes,
             cost: AgentCost {

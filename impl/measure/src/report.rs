@@ -555,7 +555,7 @@ fn markdown(r: &Results, runs: &[crate::record::RecordedRun], out: &Path) -> Str
             label(x),
             x.agents,
             x.seed,
-            x.source_cpu_ns.map_or_else(|| "?".to_owned(), |v| format!("{:.1}", ms(v))),
+            x.agent_costs.first().and_then(|c| c.cpu_ns).map_or_else(|| "?".to_owned(), |v| format!("{:.1}", ms(v))),
             mean / 1e6,
             100.0 * mean / 1e9 / x.publish_seconds.max(1e-3),
             own_rss.map_or_else(|| "shared".to_owned(), mib),

@@ -178,14 +178,10 @@ pub struct RunResult {
     pub refused: u64,
     /// Bytes counted by the transports.
     pub bandwidth: Bandwidth,
-    /// CPU time of the source thread while publishing, nanoseconds (`/proc/thread-self/schedstat`).
-    pub source_cpu_ns: Option<u64>,
-    /// CPU time of each receiver thread, nanoseconds.
-    pub receiver_cpu_ns: Vec<Option<u64>>,
     /// Peak resident memory of this process so far (`VmHWM`), bytes: all agents of in-process runs, the source
     /// of `rtps-processes` runs.
     pub process_peak_rss_bytes: Option<u64>,
-    /// CPU and memory per agent, the source first.
+    /// CPU and memory per agent, the source first (schema 2: replaces `source_cpu_ns` and `receiver_cpu_ns`).
     pub agent_costs: Vec<AgentCost>,
     /// Every latency, for merging runs (not serialised; the percentiles and CDF points are).
     #[serde(skip)]
@@ -207,8 +203,6 @@ pub(crate) struct ReceiverOutcome {
     pub refused: u64,
     /// The receiver's transport counters.
     pub stats: TransportStats,
-    /// CPU time spent receiving.
-    pub cpu_ns: Option<u64>,
     /// The receiver's final graph digest.
     pub digest: Digest,
     /// Bytes of probes received (not part of the workload).
@@ -355,7 +349,6 @@ fn receive(
         applied_at: receiving.applied_at,
         refused: receiving.refused,
         stats: transport.stats(),
-        cpu_ns,
         probe_bytes: receiving.probe_bytes,
         cost: AgentCost { agent, kind: "thread", cpu_ns, peak_rss_bytes: None },
     }
@@ -495,8 +488,6 @@ pub(crate) fn summarise(
         digests_equal,
         refused: outcomes.iter().map(|o| o.refused).sum(),
         bandwidth,
-        source_cpu_ns,
-        receiver_cpu_ns: outcomes.iter().map(|o| o.cpu_ns).collect(),
         process_peak_rss_bytes,
         agent_costs,
         latency_histogram: latency.histogram().clone(),

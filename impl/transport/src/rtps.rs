@@ -690,7 +690,10 @@ impl RtpsTransport {
     /// Writes one sample to every matched reader of `channel`, or to `reader` alone (the others are told, by a GAP,
     /// that the sequence number is not for them), with back-pressure and pacing of large samples.
     fn write(&self, channel: Channel, bytes: Bytes, reader: Option<GUID>) -> Result<(), TransportError> {
-        if self.discovery.announce_pending.swap(false, Ordering::AcqRel) {
+        // A plain load first: the read-modify-write only happens in the rare case that a peer has matched.
+        if self.discovery.announce_pending.load(Ordering::Relaxed)
+            && self.discovery.announce_pending.swap(false, Ordering::AcqRel)
+        {
             // Before this sample: peers that matched since the last one learn where this transport's readers are
             // (a peer answering a request in this sample can then address the reply to them alone).
             let mut announce = READERS_AT.to_vec();
