@@ -1,6 +1,6 @@
 //! Three `cortex agent` processes on loopback over RTPS: one seeded from a real CORTEX JSON graph, two that join
-//! it from the network and each insert nodes. All three must end with the same digest and write identical
-//! CORTEX JSON dumps when interrupted with SIGINT.
+//! it from the network and each insert nodes (agent 3 sends its updates best-effort, the others reliably: settings
+//! mix). All three must end with the same digest and write identical CORTEX JSON dumps when interrupted with SIGINT.
 
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -75,8 +75,9 @@ fn three_agent_processes_converge_to_identical_dumps() {
             break;
         }
     }
-    for id in [2, 3] {
-        procs.push(spawn(id, &prefix, &dir, &["--join-wait-ms", "60000", "--insert-nodes", "5"], tx.clone()));
+    for (id, updates) in [(2, "reliable"), (3, "best-effort")] {
+        let args = ["--join-wait-ms", "60000", "--insert-nodes", "5", "--updates", updates];
+        procs.push(spawn(id, &prefix, &dir, &args, tx.clone()));
     }
 
     let mut last = std::collections::BTreeMap::new();

@@ -30,7 +30,7 @@ use perception::obstacles::{LaserObstacleDetector, ObstacleConfig};
 use perception::sensors::{CameraReader, Image, LaserReader, write_image};
 use transport::SystemClock;
 use transport::fault::{FaultConfig, FaultPlan};
-use transport::rtps::{RtpsConfig, RtpsTransport};
+use transport::rtps::{RtpsConfig, RtpsTransport, UpdateDelivery};
 
 /// Arguments of `cortex agent`.
 #[derive(Debug, Args)]
@@ -93,6 +93,36 @@ pub struct AgentArgs {
     /// `loss`, `duplicate`, `reorder`, `reorder-ms`, `delay-ms`, `max-held`.
     #[arg(long)]
     pub faults: Option<FaultConfig>,
+    /// How this agent sends its updates: `reliable` (every peer acknowledges each), or `best-effort` (updates up
+    /// to 1 KB unacknowledged, losses repaired by anti-entropy and gap requests; see `transport::rtps`). Agents of
+    /// one graph may mix settings: each reads both.
+    #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
+    pub updates: UpdatesArg,
+}
+
+/// `--updates`: how the transport sends [`Channel::Updates`] ([`UpdateDelivery`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum UpdatesArg {
+    /// Reliable, like every channel (every reader acknowledges every sample).
+    Reliable,
+    /// Samples up to 1 KB best-effort; agents repair losses by anti-entropy and gap requests.
+    BestEffort,
+}
+
+impl From<UpdatesArg> for UpdateDelivery {
+    fn from(arg: UpdatesArg) -> UpdateDelivery {
+        match arg {
+            UpdatesArg::Reliable => UpdateDelivery::Reliable,
+            UpdatesArg::BestEffort => UpdateDelivery::BEST_EFFORT_SMALL,
+        }
+    }
+}
+
+impl UpdatesArg {
+    /// `reliable` or `best-effort`.
+    pub fn name(self) -> &'static str {
+        UpdateDelivery::from(self).name()
+    }
 }
 
 /// The BICA roles an agent process can run.
@@ -123,8 +153,7 @@ pub fn start_rtps_agent(
     id: u32,
     join_wait_ms: u64,
     seed_json: Option<&std::path::Path>,
-    domain: u16,
-    topic_prefix: &str,
+    rtps: RtpsConfig,
     faults: Option<FaultConfig>,
 ) -> Result<Arc<Agent<AgentTransport>>> {
     if id >= AgentId::LIMIT {
@@ -136,7 +165,6 @@ pub fn start_rtps_agent(
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
     }
-    let rtps = RtpsConfig { domain_id: domain, topic_prefix: topic_prefix.to_owned(), ..RtpsConfig::default() };
     let rtps = RtpsTransport::new(rtps).context("joining the DDS domain")?;
     let transport: AgentTransport = match faults {
         Some(faults) => {
@@ -154,8 +182,12 @@ pub fn run(args: AgentArgs) -> Result<()> {
         args.id,
         args.join_wait_ms,
         args.seed_json.as_deref(),
-        args.domain,
-        &args.topic_prefix,
+        RtpsConfig {
+            domain_id: args.domain,
+            topic_prefix: args.topic_prefix.clone(),
+            updates: args.updates.into(),
+            ..RtpsConfig::default()
+        },
         args.faults,
     )?;
     let stop = Arc::new(AtomicBool::new(false));

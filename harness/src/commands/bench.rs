@@ -24,6 +24,8 @@ use dsr::{Change, Element, NewNode, NodeId, Replica, Value, attrs};
 use hdrhistogram::Histogram;
 use measure::netns::{self, LoopbackCounters, NetnsSetup};
 use transport::rtps::{Multicast, RtpsConfig, RtpsTransport, estimated_wire_bytes};
+
+use super::agent::UpdatesArg;
 use transport::{Channel, Clock, SystemClock, Transport};
 
 /// Arguments of `cortex bench`.
@@ -118,6 +120,9 @@ pub struct RttArgs {
     /// Multicast for same-host readers (in a namespace, `lo` is made multicast-capable unless `off`).
     #[arg(long, value_enum, default_value_t = MulticastArg::Auto)]
     pub multicast: MulticastArg,
+    /// Deliveries of updates to compare, each measured raw and through agents, in this order.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "reliable,best-effort")]
+    pub updates: Vec<UpdatesArg>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -195,6 +200,9 @@ pub struct EchoArgs {
     /// Multicast setting.
     #[arg(long, value_enum, default_value_t = MulticastArg::Auto)]
     pub multicast: MulticastArg,
+    /// Delivery of updates.
+    #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
+    pub updates: UpdatesArg,
 }
 
 /// Arguments of the join helper.
@@ -270,10 +278,15 @@ const PING: &str = "bench_ping";
 const PONG: &str = "bench_pong";
 
 fn rtps(domain: u16, prefix: &str, multicast: MulticastArg) -> Result<RtpsTransport> {
+    rtps_with(domain, prefix, multicast, UpdatesArg::Reliable)
+}
+
+fn rtps_with(domain: u16, prefix: &str, multicast: MulticastArg, updates: UpdatesArg) -> Result<RtpsTransport> {
     RtpsTransport::new(RtpsConfig {
         domain_id: domain,
         topic_prefix: prefix.into(),
         multicast: multicast.into(),
+        updates: updates.into(),
         ..RtpsConfig::default()
     })
     .context("joining the DDS domain")
@@ -341,6 +354,8 @@ struct RttFigures {
     wire_bytes_per_update: f64,
     /// Socket-level bytes, when measured in a fresh network namespace.
     socket: Option<SocketFigures>,
+    /// Agents: gap requests of the pinging agent during the measured loop (each a repair it asked for at once).
+    gap_requests: Option<u64>,
 }
 
 /// What one ping-pong loop observed, beside its histogram.
@@ -379,6 +394,7 @@ fn figures(histogram: &Histogram<u64>, counts: &LoopCounts, socket: Option<Socke
         envelope_bytes_per_update: counts.payload_bytes as f64 / counts.pings.max(1) as f64,
         wire_bytes_per_update: counts.estimated_wire_bytes as f64 / counts.pings.max(1) as f64,
         socket,
+        gap_requests: None,
     }
 }
 
@@ -403,21 +419,30 @@ fn seq_of(bytes: &[u8]) -> Option<u64> {
 }
 
 fn rtt(args: RttArgs) -> Result<()> {
-    if args.rate <= 0.0 || args.count == 0 {
-        bail!("--rate and --count must be positive");
+    if args.rate <= 0.0 || args.count == 0 || args.updates.is_empty() {
+        bail!("--rate and --count must be positive, and --updates must name at least one delivery");
     }
     let setup = NetnsSetup { multicast: args.multicast != MulticastArg::Off };
     let Some(counting) = enter_netns(args.netns, setup)? else { return Ok(()) };
     let period = Duration::from_secs_f64(1.0 / args.rate);
-    let raw = rtt_raw(&args, period, &counting).context("raw rustdds ping-pong")?;
-    let agent = rtt_agent(&args, period, &counting).context("agent ping-pong")?;
-    let ratio = agent.p50_us as f64 / raw.p50_us.max(1) as f64;
+    let mut runs = Vec::new();
+    for &updates in &args.updates {
+        let raw = rtt_raw(&args, updates, period, &counting)
+            .with_context(|| format!("raw rustdds ping-pong, {} updates", updates.name()))?;
+        let agent = rtt_agent(&args, updates, period, &counting)
+            .with_context(|| format!("agent ping-pong, {} updates", updates.name()))?;
+        runs.push(RttRun {
+            updates: updates.name(),
+            p50_ratio: agent.p50_us as f64 / raw.p50_us.max(1) as f64,
+            agent,
+            raw,
+        });
+    }
     let multicast = Multicast::from(args.multicast).resolve();
     if args.json {
         let out = serde_json::json!({
             "payload": args.payload, "rate_hz": args.rate, "count": args.count,
-            "multicast": multicast, "netns": netns::inside().is_some(),
-            "agent": agent, "raw_rustdds": raw, "p50_ratio": ratio,
+            "multicast": multicast, "netns": netns::inside().is_some(), "runs": runs,
         });
         println!("{out}");
         return Ok(());
@@ -434,39 +459,59 @@ fn rtt(args: RttArgs) -> Result<()> {
         if multicast { "on" } else { "off" }
     );
     println!(
-        "{:<12} {:>8} {:>8} {:>8} {:>8} {:>6} {:>14} {:>14} {:>14} {:>10}",
-        "", "p50 us", "p90 us", "p99 us", "max us", "lost", "envelope B/upd", "est. wire B", "socket B/upd", "pkts/upd"
+        "{:<26} {:>7} {:>7} {:>7} {:>7} {:>5} {:>8} {:>14} {:>12} {:>12} {:>9}",
+        "",
+        "p50 us",
+        "p90 us",
+        "p99 us",
+        "max us",
+        "lost",
+        "repairs",
+        "envelope B/upd",
+        "est. wire B",
+        "socket B/upd",
+        "pkts/upd"
     );
-    for (name, f) in [("agent", &agent), ("raw rustdds", &raw)] {
-        let (socket_bytes, packets) = match &f.socket {
-            Some(s) => (format!("{:.1}", s.bytes_per_update), format!("{:.2}", s.packets_per_update)),
-            None => ("-".into(), "-".into()),
-        };
-        println!(
-            "{name:<12} {:>8} {:>8} {:>8} {:>8} {:>6} {:>14.1} {:>14.1} {socket_bytes:>14} {packets:>10}",
-            f.p50_us, f.p90_us, f.p99_us, f.max_us, f.lost, f.envelope_bytes_per_update, f.wire_bytes_per_update
-        );
+    for run in &runs {
+        for (who, f) in [("agent", &run.agent), ("raw rustdds", &run.raw)] {
+            let (socket_bytes, packets) = match &f.socket {
+                Some(s) => (format!("{:.1}", s.bytes_per_update), format!("{:.2}", s.packets_per_update)),
+                None => ("-".into(), "-".into()),
+            };
+            let repairs = f.gap_requests.map_or("-".into(), |n| n.to_string());
+            let name = format!("{who}, {}", run.updates);
+            println!(
+                "{name:<26} {:>7} {:>7} {:>7} {:>7} {:>5} {repairs:>8} {:>14.1} {:>12.1} {socket_bytes:>12} {packets:>9}",
+                f.p50_us, f.p90_us, f.p99_us, f.max_us, f.lost, f.envelope_bytes_per_update, f.wire_bytes_per_update
+            );
+        }
     }
-    println!("agent p50 / raw p50 = {ratio:.2}");
+    for run in &runs {
+        println!("{} updates: agent p50 / raw p50 = {:.2}", run.updates, run.p50_ratio);
+    }
     match &counting {
         Counting::Socket => {
-            for (name, f) in [("agent (discovery + join)", &agent), ("raw rustdds (discovery)", &raw)] {
-                if let Some(s) = &f.socket {
-                    println!(
-                        "{name}: {} B in {} packets before the first echo; steady state {} B in {} packets ({} B \
-                         multicast) for {} updates (pings + pongs)",
-                        s.discovery.tx_bytes,
-                        s.discovery.tx_packets,
-                        s.steady.tx_bytes,
-                        s.steady.tx_packets,
-                        s.steady.tx_multicast_bytes,
-                        s.updates
-                    );
+            for run in &runs {
+                for (who, f) in [("agent (discovery + join)", &run.agent), ("raw rustdds (discovery)", &run.raw)] {
+                    if let Some(s) = &f.socket {
+                        println!(
+                            "{who}, {}: {} B in {} packets before the first echo; steady state {} B in {} packets \
+                             ({} B multicast) for {} updates (pings + pongs)",
+                            run.updates,
+                            s.discovery.tx_bytes,
+                            s.discovery.tx_packets,
+                            s.steady.tx_bytes,
+                            s.steady.tx_packets,
+                            s.steady.tx_multicast_bytes,
+                            s.updates
+                        );
+                    }
                 }
             }
             println!(
-                "socket B/upd: loopback tx bytes (IPv4 + UDP + RTPS, acknowledgements, heartbeats, periodic discovery) \
-                 in the steady state / updates both ways; est. wire B: the transport's estimate for one sample"
+                "socket B/upd: loopback tx bytes (IPv4 + UDP + RTPS, acknowledgements, heartbeats, periodic discovery, \
+                 anti-entropy) in the steady state / updates both ways; est. wire B: the transport's estimate for one \
+                 sample; repairs: the pinging agent's gap requests"
             );
         }
         Counting::EstimateOnly(why) => println!("socket-level bytes not measured ({why}); est. wire B is an estimate"),
@@ -474,10 +519,19 @@ fn rtt(args: RttArgs) -> Result<()> {
     Ok(())
 }
 
-fn rtt_raw(args: &RttArgs, period: Duration, counting: &Counting) -> Result<RttFigures> {
-    let prefix = format!("rawrtt{}", std::process::id());
+/// One delivery setting's raw and agent ping-pong.
+#[derive(Debug, serde::Serialize)]
+struct RttRun {
+    updates: &'static str,
+    agent: RttFigures,
+    raw: RttFigures,
+    p50_ratio: f64,
+}
+
+fn rtt_raw(args: &RttArgs, updates: UpdatesArg, period: Duration, counting: &Counting) -> Result<RttFigures> {
+    let prefix = format!("rawrtt{}{}", std::process::id(), updates.name().replace('-', ""));
     let start = counters(counting)?;
-    let transport = rtps(args.domain, &prefix, args.multicast)?;
+    let transport = rtps_with(args.domain, &prefix, args.multicast, updates)?;
     let _helper = Helper::spawn(&[
         "bench".into(),
         "echo".into(),
@@ -488,6 +542,8 @@ fn rtt_raw(args: &RttArgs, period: Duration, counting: &Counting) -> Result<RttF
         "--raw".into(),
         "--multicast".into(),
         args.multicast.name().into(),
+        "--updates".into(),
+        updates.name().into(),
     ])?;
     // Discovery: probe until an echo comes back.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -536,12 +592,12 @@ fn bench_config(id: u32, join_wait: Duration) -> AgentConfig {
     config
 }
 
-fn rtt_agent(args: &RttArgs, period: Duration, counting: &Counting) -> Result<RttFigures> {
-    let prefix = format!("agentrtt{}", std::process::id());
+fn rtt_agent(args: &RttArgs, updates: UpdatesArg, period: Duration, counting: &Counting) -> Result<RttFigures> {
+    let prefix = format!("agentrtt{}{}", std::process::id(), updates.name().replace('-', ""));
     let start = counters(counting)?;
     let agent = Agent::start(
         bench_config(1, Duration::from_millis(300)),
-        rtps(args.domain, &prefix, args.multicast)?,
+        rtps_with(args.domain, &prefix, args.multicast, updates)?,
         Arc::new(SystemClock),
     )?;
     if !agent.wait_ready(Duration::from_secs(10)) {
@@ -559,6 +615,8 @@ fn rtt_agent(args: &RttArgs, period: Duration, counting: &Counting) -> Result<Rt
         prefix,
         "--multicast".into(),
         args.multicast.name().into(),
+        "--updates".into(),
+        updates.name().into(),
     ])?;
     // The echo agent joins, then echoes; wait for the echo of a probe.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -579,7 +637,7 @@ fn rtt_agent(args: &RttArgs, period: Duration, counting: &Counting) -> Result<Rt
     let discovered = counters(counting)?;
     let mut histogram = Histogram::<u64>::new(3)?;
     let mut counts = LoopCounts { pings: 0, pongs: 0, lost: 0, payload_bytes: 0, estimated_wire_bytes: 0 };
-    let before = agent.status().transport;
+    let before = agent.status();
     let mut next = Instant::now();
     for seq in 0..u64::from(WARMUP + args.count) {
         let sent = Instant::now();
@@ -598,11 +656,13 @@ fn rtt_agent(args: &RttArgs, period: Duration, counting: &Counting) -> Result<Rt
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
     let end = counters(counting)?;
-    let after = agent.status().transport;
-    counts.payload_bytes = after.payload_bytes_sent - before.payload_bytes_sent;
-    counts.estimated_wire_bytes = after.wire_bytes_sent - before.wire_bytes_sent;
+    let after = agent.status();
+    counts.payload_bytes = after.transport.payload_bytes_sent - before.transport.payload_bytes_sent;
+    counts.estimated_wire_bytes = after.transport.wire_bytes_sent - before.transport.wire_bytes_sent;
     let socket = socket_figures(start, discovered, end, counts.pings + counts.pongs);
-    Ok(figures(&histogram, &counts, socket))
+    let mut figures = figures(&histogram, &counts, socket);
+    figures.gap_requests = Some(after.gap_requests - before.gap_requests);
+    Ok(figures)
 }
 
 fn is_pong(change: &Change, pong: NodeId) -> bool {
@@ -610,7 +670,7 @@ fn is_pong(change: &Change, pong: NodeId) -> bool {
 }
 
 fn echo(args: EchoArgs) -> Result<()> {
-    let transport = rtps(args.domain, &args.prefix, args.multicast)?;
+    let transport = rtps_with(args.domain, &args.prefix, args.multicast, args.updates)?;
     if args.raw {
         loop {
             if let Some(sample) = transport.recv_timeout(Duration::from_secs(60)) {
@@ -1149,7 +1209,7 @@ fn fanout_once(args: &FanoutArgs, readers: u32, setting: MulticastArg, counting:
         frames: args.frames,
         payload_bytes: args.payload,
         delivered_min: counts.values().copied().min().unwrap_or(0),
-        estimated_wire_bytes_per_frame: estimated_wire_bytes(args.payload),
+        estimated_wire_bytes_per_frame: estimated_wire_bytes(args.payload, true),
         discovery: growth(discovered, start),
         steady,
         bytes_per_frame,

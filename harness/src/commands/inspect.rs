@@ -16,6 +16,7 @@ use clap::Args;
 use inspector::debug::{DebugSource, RemoteDebug};
 use inspector::feed::GraphFeed;
 use inspector::{Inspector, InspectorConfig};
+use transport::rtps::RtpsConfig;
 
 /// Arguments of `cortex inspect`.
 #[derive(Debug, Args)]
@@ -69,8 +70,7 @@ pub fn run(args: InspectArgs) -> Result<()> {
         args.id,
         args.join_wait_ms,
         args.seed_json.as_deref(),
-        args.domain,
-        &args.topic_prefix,
+        RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() },
         None,
     )?;
     let feed: Arc<dyn GraphFeed> = agent.clone();

@@ -23,6 +23,7 @@ use anyhow::{Context as _, Result, bail};
 use measure::roles::{AgentRow, ComponentRow};
 
 use super::agent::{AgentTransport, Played, Role, play_log, start_rtps_agent};
+use transport::rtps::RtpsConfig;
 
 /// A BICA role for one agent process, with the node it works on: `camera-detector`, `laser-detector:scan`, ...
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -219,7 +220,8 @@ pub fn replay(
         bail!("{} roles given for {} agent processes", config.roles.len(), config.agents.saturating_sub(1));
     }
     let prefix = format!("replay{}", std::process::id());
-    let bridge = start_rtps_agent(1, 300, None, config.domain, &prefix, None)?;
+    let rtps = RtpsConfig { domain_id: config.domain, topic_prefix: prefix.clone(), ..RtpsConfig::default() };
+    let bridge = start_rtps_agent(1, 300, None, rtps, None)?;
     if !bridge.wait_ready(Duration::from_secs(10)) {
         bail!("the bridge agent did not start its graph");
     }

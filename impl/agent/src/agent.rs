@@ -208,6 +208,10 @@ pub struct AgentStatus {
     /// Times a peer had joined the same operations but showed another graph digest (a replica bug; repaired with
     /// snapshots). Zero in a correct system.
     pub digest_mismatches: u64,
+    /// Missing-delta requests sent at once because a received delta showed a gap: its writer's previous operation
+    /// had not been joined (a lost sample, or one overtaken in flight). Anti-entropy would find the gap at the next
+    /// announce; this asks sooner.
+    pub gap_requests: u64,
     /// Call requests addressed to this agent (served, or answered with a fault).
     pub calls_served: u64,
     /// Call replies of this agent's server dropped because the reply outbox was full.
@@ -313,6 +317,7 @@ struct Inner<T> {
     rejected: AtomicU64,
     signals_dropped: AtomicU64,
     digest_mismatches: AtomicU64,
+    gap_requests: AtomicU64,
     publish_failures: AtomicU64,
     calls: Arc<CallTable>,
     service: CallService,
@@ -379,6 +384,7 @@ impl<T: Transport + 'static> Agent<T> {
             rejected: AtomicU64::new(0),
             signals_dropped: AtomicU64::new(0),
             digest_mismatches: AtomicU64::new(0),
+            gap_requests: AtomicU64::new(0),
             publish_failures: AtomicU64::new(0),
             calls: Arc::new(CallTable::new(config.max_calls_in_flight, nonce)),
             service: CallService::new(config.call_reply_outbox),
@@ -515,6 +521,7 @@ impl<T: Transport + 'static> Agent<T> {
             signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
             digest_mismatches: self.inner.digest_mismatches.load(Ordering::Relaxed),
+            gap_requests: self.inner.gap_requests.load(Ordering::Relaxed),
             calls_served: self.inner.service.served.load(Ordering::Relaxed),
             call_replies_dropped: self.inner.service.dropped.load(Ordering::Relaxed),
             late_call_replies: self.inner.calls.late.load(Ordering::Relaxed),
@@ -847,6 +854,34 @@ impl<T: Transport> Inner<T> {
         }
     }
 
+    /// Whether a missing-delta request is still outstanding (answered requests clear it; one unanswered for two
+    /// announce periods no longer counts).
+    fn asked_recently(&self, state: &State, now: u64) -> bool {
+        state
+            .pending_ask
+            .is_some_and(|(_, at)| now.saturating_sub(at) < 2 * self.config.announce_period.as_nanos() as u64)
+    }
+
+    /// The request for what `delta` shows missing, if anything: its writer's operation just before it has not been
+    /// joined. Every operation of an agent is published in order, so on a lossless channel this only happens when
+    /// samples overtake each other; an unneeded request is answered with nothing. At most one request is
+    /// outstanding, as for announces.
+    fn gap_request(&self, state: &mut State, from: AgentId, delta: &Delta, now: u64) -> Option<(Channel, Message)> {
+        let origin = delta.origin()?;
+        let replica = state.replica.as_ref()?;
+        if origin.first <= 1
+            || replica.applied().contains(dsr::Dot::new(origin.replica, origin.first - 1))
+            || self.asked_recently(state, now)
+        {
+            return None;
+        }
+        self.gap_requests.fetch_add(1, Ordering::Relaxed);
+        let request =
+            Message::MissingRequest { from: self.me(), to: from, applied: replica.applied().clone(), full: false };
+        state.pending_ask = Some((from, now));
+        Some((Channel::Sync, request))
+    }
+
     /// Joins remote deltas into the replica; returns the changes they made.
     fn apply(&self, state: &mut State, sample: &Sample, kind: &str, deltas: Vec<Arc<Delta>>) -> Vec<dsr::ChangeEvent> {
         // A join can change the store without moving the context (the snapshot repair): drop the caches.
@@ -927,8 +962,11 @@ impl<T: Transport> Inner<T> {
             let mut state = self.lock();
             state.peers.insert(message.from(), now);
             match message {
-                Message::Delta { delta, .. } => match self.delta(&sample, "delta", &delta) {
-                    Some(delta) => self.apply(&mut state, &sample, "delta", vec![delta]),
+                Message::Delta { from, delta } => match self.delta(&sample, "delta", &delta) {
+                    Some(delta) => {
+                        out.extend(self.gap_request(&mut state, from, &delta, now));
+                        self.apply(&mut state, &sample, "delta", vec![delta])
+                    }
                     None => Vec::new(),
                 },
                 Message::Announce { from, nonce, replica, applied, digest } => {
@@ -936,11 +974,8 @@ impl<T: Transport> Inner<T> {
                     if from == me {
                         self.check_collision(&mut state, nonce, Some(replica), "announce");
                     }
-                    let asked_recently = state.pending_ask.is_some_and(|(_, at)| {
-                        now.saturating_sub(at) < 2 * self.config.announce_period.as_nanos() as u64
-                    });
                     let ask = match &state.replica {
-                        Some(replica) if !asked_recently => {
+                        Some(replica) if !self.asked_recently(&state, now) => {
                             if !replica.applied().includes(&applied) {
                                 Some(false)
                             } else if *replica.applied() == applied && state.digest().map(|d| d.0) != Some(digest) {

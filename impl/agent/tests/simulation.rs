@@ -314,3 +314,59 @@ fn two_live_agents_with_one_id_detect_the_collision_and_refuse_writes() {
     let error = sim.agents[0].insert_node(NewNode::new("object", "z")).unwrap_err();
     assert!(error.to_string().contains("collision"), "{error}");
 }
+
+#[test]
+fn each_remote_update_gives_exactly_one_signal() {
+    let mut sim = Sim::new(7, FaultConfig::default());
+    sim.spawn(1);
+    sim.steps(400);
+    sim.spawn(2);
+    sim.steps(50);
+    let id = sim.agents[0].insert_node(NewNode::new("object", "ping")).unwrap();
+    sim.steps(5);
+    let remote = sim.agents[1].subscribe(1024);
+    for i in 0..20 {
+        sim.agents[0].set_attr(id, attrs::POS_X, i as f32).unwrap();
+        sim.steps(3);
+    }
+    let updates = remote
+        .try_iter()
+        .filter(|s| matches!(&s.change, Change::AttrUpdated { name, .. } if name.as_str() == "pos_x"))
+        .count();
+    assert_eq!(updates, 20);
+}
+
+#[test]
+fn a_delta_that_shows_a_gap_gets_the_missing_one_at_once_not_at_the_next_announce() {
+    let mut sim = Sim::new(11, FaultConfig::default());
+    let mut agents = Vec::new();
+    for id in [1, 2] {
+        let transport = sim.plan.wrap(sim.bus.attach(1000), Arc::new(sim.clock.clone()) as Arc<dyn Clock>);
+        // Announces far apart: only a gap request can repair within the test's few steps.
+        let cfg = AgentConfig { announce_period: Duration::from_secs(3600), ..config(id, 100 + u64::from(id)) };
+        agents.push(Agent::new(cfg, transport, Arc::new(sim.clock.clone())).unwrap());
+        sim.agents = agents;
+        sim.steps(400);
+        agents = std::mem::take(&mut sim.agents);
+    }
+    sim.agents = agents;
+    let id = sim.agents[0].insert_node(NewNode::new("object", "cup")).unwrap();
+    sim.steps(5);
+    assert!(sim.converged());
+
+    // Everything received is lost while agent 1 makes one update; then the network is perfect again.
+    sim.plan.set_config(FaultConfig { loss: 1.0, ..FaultConfig::default() });
+    sim.agents[0].set_attr(id, attrs::POS_X, 1.0f32).unwrap();
+    sim.steps(2);
+    sim.plan.set_config(FaultConfig::default());
+    assert_eq!(sim.agents[1].attr(id, attrs::POS_X), None);
+    assert_eq!(sim.agents[1].status().gap_requests, 0);
+
+    // The next update shows the gap: agent 2 asks agent 1 at once and has both within a few steps.
+    sim.agents[0].set_attr(id, attrs::POS_Y, 2.0f32).unwrap();
+    let steps = sim.settle(10);
+    assert!(steps <= 5, "converged after {steps} steps");
+    assert_eq!(sim.agents[1].attr(id, attrs::POS_X), Some(1.0));
+    assert_eq!(sim.agents[1].status().gap_requests, 1);
+    assert_eq!(sim.agents[0].status().gap_requests, 0);
+}

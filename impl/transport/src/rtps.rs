@@ -1,7 +1,8 @@
 //! RTPS through `rustdds`: the transport real agents use.
 //!
 //! Two DDS domain participants per agent (one for its writers, one for its readers), one non-keyed topic per
-//! [`Channel`] named `{prefix}_{channel}`, every writer and reader RELIABLE + KEEP_ALL + VOLATILE with **explicit
+//! [`Channel`] named `{prefix}_{channel}` (plus `{prefix}_updates_be` with best-effort updates, below), every writer
+//! and reader RELIABLE + KEEP_ALL + VOLATILE with **explicit
 //! [`ResourceLimits`] (`rustdds` otherwise keeps only 64 samples per reader)**. A sample travels as a CDR
 //! `sequence<octet>` (4-byte length, then the bytes), so any DDS implementation can read it with a one-field IDL
 //! type.
@@ -37,6 +38,24 @@
 //! on `lo`). [`Multicast::Auto`], the default, does so exactly when the loopback interface is up and
 //! multicast-capable ([`loopback_multicast_capable`]).
 //!
+//! With multicast on, a participant **advertises only this host's addresses outside `127.0.0.0/8`**
+//! ([`routable_ipv4_addresses`], passed to `rustdds`'s `with_only_networks`) when it has any. `rustdds` sends a
+//! message meant for one participant (an acknowledgement, a repair) to every unicast locator that participant
+//! advertises, and routes a reader per source address, so a host with two addresses (127.0.0.1 and a routable one)
+//! got every acknowledgement twice and, for some readers, every sample twice: 5.5 datagrams per small update where 3
+//! suffice (measured with `cortex bench rtt` in a namespace). Without multicast, `rustdds`'s same-host loopback
+//! preference already picks one route, and every address is advertised as usual.
+//!
+//! **Best-effort updates** ([`RtpsConfig::updates`], [`UpdateDelivery`]). `rustdds` sends a heartbeat that asks for
+//! an acknowledgement beside every reliable DATA, so every matched reader acknowledges every sample, and a
+//! transport's own reader is one of them (`rustdds` has no way to ignore a participant): a small update costs its
+//! DATA datagram plus one acknowledgement datagram per agent. With [`UpdateDelivery::BestEffort`], samples on
+//! [`Channel::Updates`] up to a size go on a best-effort topic of their own and cost their DATA datagram alone;
+//! larger ones, directed writes and every other channel stay reliable. Every transport reads that topic, whatever
+//! its own setting, so agents of one graph may mix settings. A lost small update is then the user's to
+//! repair: agents repair it by anti-entropy, and at once when a later delta of the same writer shows the gap (see
+//! the `agent` crate). Reliable stays the default.
+//!
 //! A sample meant for one peer ([`Transport::publish_to`], e.g. a graph answer) is written to that participant's
 //! reader alone (a directed write; the other readers get a GAP for its sequence number), so a multi-megabyte answer
 //! is not copied to every reader — including this participant's own reader, which rustdds matches too.
@@ -47,10 +66,11 @@
 //! the graph as soon as a peer can hear it. (rustdds sends a new participant's first discovery announcement 100 ms
 //! after it is created — a constant of rustdds 0.15, not a setting — so no peer is found sooner than that.)
 //!
-//! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B), the RTPS DATA and
-//! INFO_TS submessages (36 B), and one RTPS header plus UDP/IPv4 header (48 B) per datagram of up to 64 KiB;
-//! acknowledgements and heartbeats are not seen by this layer, and the estimate counts one copy per sample
-//! whatever the number of readers. Exact socket-level figures come from a measurement in a fresh network
+//! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B) padded to 4, the RTPS
+//! DATA submessage (24 B), for a reliable sample the heartbeat beside it (32 B), and one RTPS header plus UDP/IPv4
+//! header (48 B) per datagram of up to 64 KiB ([`estimated_wire_bytes`]; exact for an unfragmented sample:
+//! 132 and 164 B for a 50-byte envelope, best-effort and reliable). Readers' acknowledgements are not seen by this
+//! layer, and the estimate counts one copy per sample whatever the number of readers. Exact socket-level figures come from a measurement in a fresh network
 //! namespace (`measure::netns`, `cortex bench rtt|fanout`).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -183,6 +203,18 @@ pub fn loopback_multicast_capable() -> bool {
         .any(|iface| iface.is_loopback() && iface.is_up() && iface.is_multicast() && !iface.ipv4.is_empty())
 }
 
+/// This host's IPv4 addresses outside `127.0.0.0/8`, if it has any: what a multicast participant advertises.
+pub fn routable_ipv4_addresses() -> Option<Vec<std::net::IpAddr>> {
+    let addresses: Vec<std::net::IpAddr> = netdev::get_interfaces()
+        .iter()
+        .filter(|iface| iface.is_up())
+        .flat_map(|iface| iface.ipv4.iter().map(|net| net.addr()))
+        .filter(|addr| !addr.is_loopback())
+        .map(std::net::IpAddr::V4)
+        .collect();
+    (!addresses.is_empty()).then_some(addresses)
+}
+
 /// Settings of an [`RtpsTransport`].
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RtpsConfig {
@@ -208,6 +240,37 @@ pub struct RtpsConfig {
     pub separate_reader_participant: bool,
     /// One multicast datagram for all same-host readers, or one unicast copy each.
     pub multicast: Multicast,
+    /// How samples on [`Channel::Updates`] travel: reliable like every other channel, or small ones best-effort.
+    pub updates: UpdateDelivery,
+}
+
+/// How samples on [`Channel::Updates`] travel (see the module documentation, "Best-effort updates").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum UpdateDelivery {
+    /// Reliable, like every other channel. `rustdds` puts a heartbeat that asks for an acknowledgement beside every
+    /// DATA, so every matched reader — the writer's own transport's reader included — acknowledges every sample.
+    #[default]
+    Reliable,
+    /// Samples of at most `max_bytes` go on a best-effort topic of their own (`{prefix}_updates_be`): no heartbeat,
+    /// no acknowledgement, no repair by the DDS engine. Larger samples stay reliable. Whoever uses this repairs
+    /// losses itself: agents do, by anti-entropy and by asking a peer at once when a delta shows a gap.
+    BestEffort {
+        /// The largest sample sent best-effort (keep it below one datagram: a lost fragment loses the sample).
+        max_bytes: usize,
+    },
+}
+
+impl UpdateDelivery {
+    /// Best-effort for samples up to 1 KB, which stay one datagram on any usual path MTU.
+    pub const BEST_EFFORT_SMALL: UpdateDelivery = UpdateDelivery::BestEffort { max_bytes: 1024 };
+
+    /// The name used on command lines and in reports: `reliable` or `best-effort`.
+    pub fn name(self) -> &'static str {
+        match self {
+            UpdateDelivery::Reliable => "reliable",
+            UpdateDelivery::BestEffort { .. } => "best-effort",
+        }
+    }
 }
 
 impl Default for RtpsConfig {
@@ -223,14 +286,17 @@ impl Default for RtpsConfig {
             max_blocking: Duration::from_secs(2),
             separate_reader_participant: true,
             multicast: Multicast::Auto,
+            updates: UpdateDelivery::Reliable,
         }
     }
 }
 
-/// Estimated wire bytes of one sample of `payload` bytes (see the module documentation).
-pub fn estimated_wire_bytes(payload: usize) -> usize {
+/// Estimated wire bytes of one sample of `payload` bytes, written reliably (with its heartbeat) or best-effort
+/// (see the module documentation).
+pub fn estimated_wire_bytes(payload: usize, reliable: bool) -> usize {
     let datagrams = payload.div_ceil(64 << 10).max(1);
-    payload + 8 + 36 + 48 * datagrams
+    let heartbeat = if reliable { 32 } else { 0 };
+    (payload + 8).next_multiple_of(4) + 24 + heartbeat + 48 * datagrams
 }
 
 /// A sample as `rustdds` sees it: opaque bytes.
@@ -320,8 +386,13 @@ type Reader = SimpleDataReader<Payload, OctetsAdapter>;
 
 /// The QoS of every reader and writer: reliable, keep-all, volatile, explicit resource limits.
 pub fn qos(config: &RtpsConfig) -> QosPolicies {
+    qos_with(config, Reliability::Reliable { max_blocking_time: config.max_blocking.into() })
+}
+
+/// [`qos`] with another reliability (the best-effort updates topic).
+fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPolicies {
     QosPolicyBuilder::new()
-        .reliability(Reliability::Reliable { max_blocking_time: config.max_blocking.into() })
+        .reliability(reliability)
         .history(History::KeepAll)
         .durability(Durability::Volatile)
         .resource_limits(ResourceLimits {
@@ -337,6 +408,8 @@ pub fn qos(config: &RtpsConfig) -> QosPolicies {
 pub struct RtpsTransport {
     // Writers and the receiving thread (which owns the readers) before the participants, so they are dropped first.
     writers: Vec<Mutex<Writer>>,
+    /// The best-effort updates writer and the largest sample it takes ([`UpdateDelivery::BestEffort`]).
+    best_effort: Option<(Mutex<Writer>, usize)>,
     inbox: Receiver<Sample>,
     stop: Arc<AtomicBool>,
     receiver: Option<JoinHandle<()>>,
@@ -392,12 +465,15 @@ impl RtpsTransport {
     /// [`TransportError::Setup`] if a participant, a topic, a reader or a writer cannot be created.
     pub fn new(config: RtpsConfig) -> Result<Self, TransportError> {
         let multicast = config.multicast.resolve();
+        let networks = if multicast { routable_ipv4_addresses() } else { None };
         let join = |role: &str| {
-            DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast).build().map_err(|e| {
-                TransportError::Setup {
-                    what: format!("{role} participant in domain {}", config.domain_id),
-                    detail: format!("{e:?}"),
-                }
+            let mut builder = DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast);
+            if let Some(addresses) = networks.clone() {
+                builder = builder.with_only_networks(addresses);
+            }
+            builder.build().map_err(|e| TransportError::Setup {
+                what: format!("{role} participant in domain {}", config.domain_id),
+                detail: format!("{e:?}"),
             })
         };
         let publishing = join("publishing")?;
@@ -434,6 +510,33 @@ impl RtpsTransport {
             writers.push(Mutex::new(writer));
             readers.push((channel, reader));
         }
+        // Every transport reads the best-effort updates topic, so agents of one graph may mix settings; only a
+        // transport set to best-effort writes on it.
+        let best_effort = {
+            let name = format!("{}_updates_be", config.topic_prefix);
+            let qos = qos_with(&config, Reliability::BestEffort);
+            let topic = |participant: &DomainParticipant| {
+                participant
+                    .create_topic(name.clone(), "cortex::Envelope".into(), &qos, TopicKind::NoKey)
+                    .map_err(setup(format!("topic {name}")))
+            };
+            let read = topic(subscribing.as_ref().unwrap_or(&publishing))?;
+            let reader = subscriber
+                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&read, Some(qos.clone()))
+                .map_err(setup(format!("reader of {name}")))?;
+            let writer = match config.updates {
+                UpdateDelivery::Reliable => None,
+                UpdateDelivery::BestEffort { max_bytes } => {
+                    let writer = publisher
+                        .create_datawriter_no_key::<Payload, OctetsAdapter>(&topic(&publishing)?, Some(qos.clone()))
+                        .map_err(setup(format!("writer of {name}")))?;
+                    endpoints.push((Channel::Updates, writer.guid(), reader.guid()));
+                    Some((Mutex::new(writer), max_bytes))
+                }
+            };
+            readers.push((Channel::Updates, reader));
+            writer
+        };
         // Samples are tagged with their writer's GUID prefix: the publishing participant's.
         let local = endpoint_of(publishing.guid());
         let discovery = Arc::new(DiscoveryState::default());
@@ -458,6 +561,7 @@ impl RtpsTransport {
         };
         Ok(RtpsTransport {
             writers,
+            best_effort,
             inbox,
             stop,
             receiver: Some(receiver),
@@ -712,6 +816,20 @@ impl RtpsTransport {
                 limit: self.config.max_sample_bytes,
             });
         }
+        if channel == Channel::Updates
+            && reader.is_none()
+            && let Some((writer, max_bytes)) = &self.best_effort
+            && size <= *max_bytes
+        {
+            // Best-effort never waits for acknowledgements; a full send buffer loses the sample, which the user of
+            // this transport repairs.
+            let writer = writer.lock().unwrap_or_else(|p| p.into_inner());
+            writer
+                .write(Payload(bytes), None)
+                .map_err(|error| TransportError::Write { channel: channel.name(), detail: format!("{error:?}") })?;
+            self.counters.sent(size, estimated_wire_bytes(size, false));
+            return Ok(());
+        }
         let writer = self.writers[channel.index()].lock().unwrap_or_else(|p| p.into_inner());
         let deadline = Instant::now() + self.config.max_blocking * 4;
         let payload = Payload(bytes);
@@ -740,7 +858,7 @@ impl RtpsTransport {
                 let _ = writer.wait_for_acknowledgments(self.config.max_blocking);
             }
         }
-        self.counters.sent(size, estimated_wire_bytes(size));
+        self.counters.sent(size, estimated_wire_bytes(size, true));
         Ok(())
     }
 }
@@ -765,7 +883,10 @@ mod tests {
 
     #[test]
     fn wire_estimate_grows_with_datagrams() {
-        assert_eq!(estimated_wire_bytes(40), 40 + 8 + 36 + 48);
-        assert!(estimated_wire_bytes(1 << 20) > (1 << 20) + 16 * 48);
+        // A 50-byte envelope: IPv4 + UDP + RTPS header (48), DATA (24), encapsulation and length (8), padding to 4
+        // (2); reliable adds the heartbeat (32). Measured on loopback: 132 and 164 bytes per datagram.
+        assert_eq!(estimated_wire_bytes(50, false), 132);
+        assert_eq!(estimated_wire_bytes(50, true), 164);
+        assert!(estimated_wire_bytes(1 << 20, true) > (1 << 20) + 16 * 48);
     }
 }
