@@ -643,3 +643,8 @@ fn from_wire(
     };
     Ok(delta)
 }
+
+#[cfg(test)]
+mod reference;
+#[cfg(test)]
+mod wire_tests;
