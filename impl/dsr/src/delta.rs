@@ -227,35 +227,179 @@ impl DeltaParts<'_> {
     }
 
     /// Appends the encoded delta to `out` (the format of [`Delta::encode`]).
+    ///
+    /// The body is written straight from the store, item by item, with postcard's own serializer (so every number
+    /// and string has postcard's encoding, and the bytes are those of the wire structures the layout describes);
+    /// nothing is copied first. The header byte is written last, once the body has shown whether the clock must
+    /// travel (it must when it is not the highest value stamp, which the body finds on the way).
     pub(crate) fn encode_into(&self, out: &mut Vec<u8>) {
-        let wire = to_wire(self);
-        let clock = (self.clock != self.max_value_stamp()).then(|| self.clock.0.to_le_bytes());
-        let applied: Option<WireContext> = (!self.applied.is_empty()).then(|| {
-            (
-                self.applied.version_vector().iter().map(|(r, c)| (r.0, *c)).collect(),
-                self.applied.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
-            )
-        });
+        let header_at = out.len();
+        out.push(0);
+        let mut body =
+            Body { ser: postcard::Serializer { output: Out(out) }, origin: self.origin, max_stamp: Stamp(0) };
+        body.delta(self).expect("encoding into a Vec cannot fail");
+        let Body { ser, max_stamp, .. } = body;
+        let out = ser.output.0;
+        let clock = self.clock != max_stamp;
+        if clock {
+            out.extend_from_slice(&self.clock.0.to_le_bytes());
+        }
+        let applied = !self.applied.is_empty();
+        if applied {
+            let mut ser = postcard::Serializer { output: Out(out) };
+            context(&mut ser, self.applied).expect("encoding into a Vec cannot fail");
+        }
         let mut header = WIRE_VERSION << 3;
         header |= if self.complete { FLAG_COMPLETE } else { 0 };
-        header |= if clock.is_some() { FLAG_CLOCK } else { 0 };
-        header |= if applied.is_some() { FLAG_APPLIED } else { 0 };
-        out.push(header);
-        let mut encoded = postcard::to_extend(&wire, std::mem::take(out)).expect("encoding into a Vec cannot fail");
-        if let Some(clock) = clock {
-            encoded.extend_from_slice(&clock);
+        header |= if clock { FLAG_CLOCK } else { 0 };
+        header |= if applied { FLAG_APPLIED } else { 0 };
+        out[header_at] = header;
+    }
+}
+
+/// postcard output appended straight to the caller's buffer.
+struct Out<'a>(&'a mut Vec<u8>);
+
+impl postcard::ser_flavors::Flavor for Out<'_> {
+    type Output = ();
+
+    fn try_push(&mut self, byte: u8) -> postcard::Result<()> {
+        self.0.push(byte);
+        Ok(())
+    }
+
+    fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
+        // Most pieces are varints of a few bytes: copied inline, not through a `memcpy` call each.
+        if bytes.len() <= 16 {
+            self.0.reserve(bytes.len());
+            for &byte in bytes {
+                self.0.push(byte);
+            }
+        } else {
+            self.0.extend_from_slice(bytes);
         }
-        if let Some(applied) = applied {
-            encoded = postcard::to_extend(&applied, encoded).expect("encoding into a Vec cannot fail");
+        Ok(())
+    }
+
+    fn finalize(self) -> postcard::Result<()> {
+        Ok(())
+    }
+}
+
+type Ser<'a> = postcard::Serializer<Out<'a>>;
+
+/// Writes one item in postcard's encoding.
+fn put<T: Serialize + ?Sized>(ser: &mut Ser<'_>, item: &T) -> postcard::Result<()> {
+    item.serialize(ser)
+}
+
+/// Writes a list's length (postcard: a varint, as `usize`).
+fn put_len(ser: &mut Ser<'_>, len: usize) -> postcard::Result<()> {
+    put(ser, &len)
+}
+
+/// A causal context: version vector `(replica, counter)`, then out-of-order dots `(replica, counter)`.
+fn context(ser: &mut Ser<'_>, ctx: &CausalContext) -> postcard::Result<()> {
+    put_len(ser, ctx.version_vector().len())?;
+    for (replica, counter) in ctx.version_vector() {
+        put(ser, &(replica.0, *counter))?;
+    }
+    put_len(ser, ctx.cloud().len())?;
+    for dot in ctx.cloud() {
+        put(ser, &(dot.replica.0, dot.counter))?;
+    }
+    Ok(())
+}
+
+/// The body writer: knows the delta's origin (dots are written relative to it) and finds the highest value stamp.
+struct Body<'a> {
+    ser: Ser<'a>,
+    origin: Option<Origin>,
+    max_stamp: Stamp,
+}
+
+impl Body<'_> {
+    fn delta(&mut self, delta: &DeltaParts<'_>) -> postcard::Result<()> {
+        let origin = self.origin;
+        put(&mut self.ser, &origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)))?;
+        // The generated dots are implied by `origin`; the rest of the context travels explicitly.
+        let mut vv: SmallVec<[(u32, u64); 4]> = SmallVec::new();
+        for &(replica, counter) in delta.ctx.version_vector() {
+            match origin {
+                // The entry ends at the generated range: send only the part before it.
+                Some(o) if o.replica == replica && counter == o.last => {
+                    if o.first > 1 {
+                        vv.push((replica.0, o.first - 1));
+                    }
+                }
+                _ => vv.push((replica.0, counter)),
+            }
         }
-        *out = encoded;
+        put(&mut self.ser, vv.as_slice())?;
+        let generated =
+            |dot: &Dot| origin.is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter));
+        put_len(&mut self.ser, delta.ctx.cloud().iter().filter(|dot| !generated(dot)).count())?;
+        for dot in delta.ctx.cloud().iter().filter(|dot| !generated(dot)) {
+            put(&mut self.ser, &wire_dot(*dot, origin))?;
+        }
+
+        let store = delta.store;
+        put_len(&mut self.ser, store.tombstones.len())?;
+        for id in &store.tombstones {
+            put(&mut self.ser, &id.0)?;
+        }
+        put_len(&mut self.ser, store.nodes.len())?;
+        for (id, node) in &store.nodes {
+            put(&mut self.ser, &id.0)?;
+            put_len(&mut self.ser, node.core.values.len())?;
+            for entry in &node.core.values {
+                self.entry_head(entry)?;
+                put(&mut self.ser, &(entry.value.node_type.as_str(), entry.value.name.as_str()))?;
+            }
+            self.attrs(&node.attrs)?;
+        }
+        put_len(&mut self.ser, store.edges.len())?;
+        for (key, edge) in &store.edges {
+            put(&mut self.ser, &(key.from.0, key.to.0, key.edge_type.as_str()))?;
+            put_len(&mut self.ser, edge.presence.values.len())?;
+            for entry in &edge.presence.values {
+                // The value `()` takes no bytes.
+                self.entry_head(entry)?;
+            }
+            self.attrs(&edge.attrs)?;
+        }
+        Ok(())
+    }
+
+    /// An entry's dot and stamp (its value follows).
+    fn entry_head<T>(&mut self, entry: &Entry<T>) -> postcard::Result<()> {
+        self.max_stamp = self.max_stamp.max(entry.stamp);
+        put(&mut self.ser, &wire_dot(entry.dot, self.origin))?;
+        put(&mut self.ser, &entry.stamp.0.to_le_bytes())
+    }
+
+    fn attrs(&mut self, attrs: &Attrs) -> postcard::Result<()> {
+        put_len(&mut self.ser, attrs.len())?;
+        for (name, register) in attrs {
+            let name = match Dictionary::builtin_attr_code(name) {
+                Some(code) => WireName::Builtin(code),
+                None => WireName::Text(name.as_str()),
+            };
+            put(&mut self.ser, &name)?;
+            put_len(&mut self.ser, register.values.len())?;
+            for entry in &register.values {
+                self.entry_head(entry)?;
+                put(&mut self.ser, &entry.value)?;
+            }
+        }
+        Ok(())
     }
 }
 
 // ---------------------------------------------------------------------------------------------------------------
-// Wire structures.
+// Wire structures: what decoding reads (encoding writes the same bytes straight from the store).
 
-#[derive(Serialize, Deserialize)]
+#[derive(Deserialize)]
 struct WireDelta<'a> {
     origin: Option<(u32, u64, u32)>,
     vv: Vec<(u32, u64)>,
@@ -277,7 +421,7 @@ enum WireDot {
     Other(u32, u64),
 }
 
-#[derive(Serialize, Deserialize)]
+#[derive(Deserialize)]
 struct WireNode<'a> {
     id: u64,
     #[serde(borrow)]
@@ -286,7 +430,7 @@ struct WireNode<'a> {
     attrs: Vec<WireRegister<'a>>,
 }
 
-#[derive(Serialize, Deserialize)]
+#[derive(Deserialize)]
 struct WireEdge<'a> {
     from: u64,
     to: u64,
@@ -296,7 +440,7 @@ struct WireEdge<'a> {
     attrs: Vec<WireRegister<'a>>,
 }
 
-#[derive(Serialize, Deserialize)]
+#[derive(Deserialize)]
 struct WireRegister<'a> {
     #[serde(borrow)]
     name: WireName<'a>,
@@ -309,7 +453,7 @@ enum WireName<'a> {
     Text(&'a str),
 }
 
-#[derive(Serialize, Deserialize)]
+#[derive(Deserialize)]
 struct WireEntry<T> {
     dot: WireDot,
     stamp: [u8; 8],
@@ -320,95 +464,6 @@ fn wire_dot(dot: Dot, origin: Option<Origin>) -> WireDot {
     match origin {
         Some(o) if o.replica == dot.replica => WireDot::Same(dot.counter.wrapping_sub(o.first) as i64),
         _ => WireDot::Other(dot.replica.0, dot.counter),
-    }
-}
-
-fn to_wire<'d>(delta: &DeltaParts<'d>) -> WireDelta<'d> {
-    let origin = delta.origin;
-    let generated =
-        |dot: &Dot| origin.is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter));
-    // The generated dots are implied by `origin`; the rest of the context travels explicitly.
-    let mut vv = Vec::new();
-    let mut cloud = Vec::new();
-    for &(replica, counter) in delta.ctx.version_vector() {
-        match origin {
-            // The entry ends at the generated range: send only the part before it.
-            Some(o) if o.replica == replica && counter == o.last => {
-                if o.first > 1 {
-                    vv.push((replica.0, o.first - 1));
-                }
-            }
-            _ => vv.push((replica.0, counter)),
-        }
-    }
-    for dot in delta.ctx.cloud() {
-        if !generated(dot) {
-            cloud.push(wire_dot(*dot, origin));
-        }
-    }
-    let entries = |register: &Register<Value>| -> Vec<WireEntry<Value>> {
-        register
-            .values
-            .iter()
-            .map(|e| WireEntry { dot: wire_dot(e.dot, origin), stamp: e.stamp.0.to_le_bytes(), value: e.value.clone() })
-            .collect()
-    };
-    fn attrs<'d>(
-        attrs: &'d Attrs,
-        entries: &dyn Fn(&Register<Value>) -> Vec<WireEntry<Value>>,
-    ) -> Vec<WireRegister<'d>> {
-        attrs
-            .iter()
-            .map(|(name, register)| WireRegister {
-                name: match Dictionary::builtin_attr_code(name) {
-                    Some(code) => WireName::Builtin(code),
-                    None => WireName::Text(name.as_str()),
-                },
-                values: entries(register),
-            })
-            .collect()
-    }
-    WireDelta {
-        origin: origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)),
-        vv,
-        cloud,
-        tombstones: delta.store.tombstones.iter().map(|id| id.0).collect(),
-        nodes: delta
-            .store
-            .nodes
-            .iter()
-            .map(|(id, node)| WireNode {
-                id: id.0,
-                core: node
-                    .core
-                    .values
-                    .iter()
-                    .map(|e| WireEntry {
-                        dot: wire_dot(e.dot, origin),
-                        stamp: e.stamp.0.to_le_bytes(),
-                        value: (e.value.node_type.as_str(), e.value.name.as_str()),
-                    })
-                    .collect(),
-                attrs: attrs(&node.attrs, &entries),
-            })
-            .collect(),
-        edges: delta
-            .store
-            .edges
-            .iter()
-            .map(|(key, edge)| WireEdge {
-                from: key.from.0,
-                to: key.to.0,
-                edge_type: key.edge_type.as_str(),
-                presence: edge
-                    .presence
-                    .values
-                    .iter()
-                    .map(|e| WireEntry { dot: wire_dot(e.dot, origin), stamp: e.stamp.0.to_le_bytes(), value: () })
-                    .collect(),
-                attrs: attrs(&edge.attrs, &entries),
-            })
-            .collect(),
     }
 }
 

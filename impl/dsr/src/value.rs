@@ -413,6 +413,15 @@ mod f32_slice {
     use super::*;
 
     pub fn serialize<S: serde::Serializer>(values: &Arc<[f32]>, serializer: S) -> Result<S::Ok, S::Error> {
+        // Short vectors (an RT edge's three values) go through a stack buffer, not an allocation.
+        const SHORT: usize = 16;
+        if values.len() <= SHORT {
+            let mut bytes = [0u8; SHORT * 4];
+            for (chunk, value) in bytes.chunks_exact_mut(4).zip(values.iter()) {
+                chunk.copy_from_slice(&value.to_le_bytes());
+            }
+            return serializer.serialize_bytes(&bytes[..values.len() * 4]);
+        }
         let mut bytes = Vec::with_capacity(values.len() * 4);
         for value in values.iter() {
             bytes.extend_from_slice(&value.to_le_bytes());
@@ -445,6 +454,14 @@ mod u64_slice {
     use super::*;
 
     pub fn serialize<S: serde::Serializer>(values: &Arc<[u64]>, serializer: S) -> Result<S::Ok, S::Error> {
+        const SHORT: usize = 8;
+        if values.len() <= SHORT {
+            let mut bytes = [0u8; SHORT * 8];
+            for (chunk, value) in bytes.chunks_exact_mut(8).zip(values.iter()) {
+                chunk.copy_from_slice(&value.to_le_bytes());
+            }
+            return serializer.serialize_bytes(&bytes[..values.len() * 8]);
+        }
         let mut bytes = Vec::with_capacity(values.len() * 8);
         for value in values.iter() {
             bytes.extend_from_slice(&value.to_le_bytes());
