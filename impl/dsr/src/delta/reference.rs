@@ -15,7 +15,7 @@ use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store
 use crate::value::Value;
 
 /// The highest stamp of a value carried.
-fn max_value_stamp(parts: &DeltaParts<'_>) -> Stamp {
+pub(super) fn max_value_stamp(parts: &DeltaParts<'_>) -> Stamp {
     let attrs = |attrs: &Attrs| attrs.values().flat_map(|r| r.values.iter().map(|e| e.stamp)).max();
     let nodes = parts.store.nodes.values().flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
     let edges =

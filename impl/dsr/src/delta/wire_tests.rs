@@ -269,7 +269,7 @@ fn a_fixed_history_encodes_to_pinned_bytes() {
             || r.store().edges.values().any(|e| e.presence.values.len() > 1 || concurrent(&e.attrs))
     };
     assert!(replicas.iter().any(store), "concurrent values");
-    assert!(deltas.iter().any(|d| d.clock != d.max_value_stamp()), "deltas whose clock travels");
+    assert!(deltas.iter().any(|d| d.clock != reference::max_value_stamp(&d.borrowed())), "deltas whose clock travels");
     let delta_bytes: Vec<Vec<u8>> = deltas.iter().map(|d| d.encode()).collect();
     let snapshots: Vec<Vec<u8>> = replicas.iter().map(Replica::encode_snapshot).collect();
     let total: usize = delta_bytes.iter().map(Vec::len).sum();
