@@ -386,7 +386,9 @@ impl Body<'_> {
     fn entry_head<T>(&mut self, entry: &Entry<T>) -> postcard::Result<()> {
         self.max_stamp = self.max_stamp.max(entry.stamp);
         put(&mut self.ser, &wire_dot(entry.dot, self.origin))?;
-        put(&mut self.ser, &entry.stamp.0.to_le_bytes())
+        // A `[u8; 8]` is its 8 bytes in postcard: written in one piece rather than byte by byte.
+        self.ser.output.0.extend_from_slice(&entry.stamp.0.to_le_bytes());
+        Ok(())
     }
 
     fn attrs(&mut self, attrs: &Attrs) -> postcard::Result<()> {
