@@ -22,6 +22,14 @@
 //!
 //! Nothing follows; [`Delta::decode`] refuses trailing bytes. Run recordings carry exactly these bytes as MCAP
 //! messages with message encoding `dsr-delta-v1` (version 1 of this layout).
+//!
+//! Both directions work item by item with postcard's own serializer and deserializer, straight from and into the
+//! store's types (a snapshot of a whole graph is neither copied into nor read through intermediate wire lists).
+//! Decoding checks each item as it reads it and stops at the first problem, so of several problems the one
+//! reported is the first in the bytes (trailing bytes are found last). The bytes are pinned by
+//! `delta/wire_tests.rs`, which also holds this codec to the list-building one it replaced (`delta/reference.rs`).
+
+use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 use smallvec::SmallVec;
@@ -128,11 +136,6 @@ impl Delta {
         self.clock
     }
 
-    /// The highest stamp of a value carried.
-    pub(crate) fn max_value_stamp(&self) -> Stamp {
-        self.borrowed().max_value_stamp()
-    }
-
     /// The delta's parts, borrowed: what encoding reads.
     fn borrowed(&self) -> DeltaParts<'_> {
         DeltaParts {
@@ -179,8 +182,9 @@ impl Delta {
         if version != WIRE_VERSION {
             return Err(DeltaError::Version { found: version, supported: WIRE_VERSION });
         }
-        let (wire, rest): (WireDelta<'_>, &[u8]) = postcard::take_from_bytes(body)
-            .map_err(|e| DeltaError::Encoding(format!("{e} (body of {} bytes)", body.len())))?;
+        let mut reader = Reader { de: postcard::Deserializer::from_bytes(body), body_len: body.len() };
+        let (mut delta, max_stamp) = reader.delta(header & FLAG_COMPLETE != 0)?;
+        let rest = reader.de.finalize().map_err(|e| DeltaError::Encoding(format!("end of the body: {e}")))?;
         let (clock, rest) = if header & FLAG_CLOCK != 0 {
             let (clock, rest) = rest
                 .split_first_chunk::<8>()
@@ -199,7 +203,24 @@ impl Delta {
         if !rest.is_empty() {
             return Err(DeltaError::Encoding(format!("{} trailing bytes after the delta", rest.len())));
         }
-        from_wire(wire, header & FLAG_COMPLETE != 0, clock, applied)
+        if let Some((vv, cloud)) = applied {
+            check_len(|| "applied operations", vv.len().saturating_add(cloud.len()))?;
+            if vv.iter().chain(&cloud).any(|(replica, _)| *replica == 0) {
+                return Err(invalid("applied operations", "replica id 0"));
+            }
+            if cloud.iter().any(|(_, counter)| *counter == 0) {
+                return Err(invalid("applied operations", "dot counter 0"));
+            }
+            delta.applied = CausalContext::from_parts(
+                vv.into_iter().map(|(r, c)| (ReplicaId(r), c)).collect(),
+                cloud.into_iter().map(|(r, c)| Dot::new(ReplicaId(r), c)).collect(),
+            );
+        }
+        delta.clock = match clock {
+            Some(bytes) => Stamp(u64::from_le_bytes(bytes)),
+            None => max_stamp,
+        };
+        Ok(delta)
     }
 }
 
@@ -216,56 +237,180 @@ pub(crate) struct DeltaParts<'a> {
 }
 
 impl DeltaParts<'_> {
-    /// The highest stamp of a value carried.
-    fn max_value_stamp(&self) -> Stamp {
-        let attrs = |attrs: &Attrs| attrs.values().flat_map(|r| r.values.iter().map(|e| e.stamp)).max();
-        let nodes =
-            self.store.nodes.values().flat_map(|n| n.core.values.iter().map(|e| e.stamp).chain(attrs(&n.attrs)));
-        let edges =
-            self.store.edges.values().flat_map(|e| e.presence.values.iter().map(|p| p.stamp).chain(attrs(&e.attrs)));
-        nodes.chain(edges).max().unwrap_or_default()
-    }
-
     /// Appends the encoded delta to `out` (the format of [`Delta::encode`]).
+    ///
+    /// The body is written straight from the store, item by item, with postcard's own serializer (so every number
+    /// and string has postcard's encoding, and the bytes are those of the wire structures the layout describes);
+    /// nothing is copied first. The header byte is written last, once the body has shown whether the clock must
+    /// travel (it must when it is not the highest value stamp, which the body finds on the way).
     pub(crate) fn encode_into(&self, out: &mut Vec<u8>) {
-        let wire = to_wire(self);
-        let clock = (self.clock != self.max_value_stamp()).then(|| self.clock.0.to_le_bytes());
-        let applied: Option<WireContext> = (!self.applied.is_empty()).then(|| {
-            (
-                self.applied.version_vector().iter().map(|(r, c)| (r.0, *c)).collect(),
-                self.applied.cloud().iter().map(|d| (d.replica.0, d.counter)).collect(),
-            )
-        });
+        let header_at = out.len();
+        out.push(0);
+        let mut body =
+            Body { ser: postcard::Serializer { output: Out(out) }, origin: self.origin, max_stamp: Stamp(0) };
+        body.delta(self).expect("encoding into a Vec cannot fail");
+        let Body { ser, max_stamp, .. } = body;
+        let out = ser.output.0;
+        let clock = self.clock != max_stamp;
+        if clock {
+            out.extend_from_slice(&self.clock.0.to_le_bytes());
+        }
+        let applied = !self.applied.is_empty();
+        if applied {
+            let mut ser = postcard::Serializer { output: Out(out) };
+            context(&mut ser, self.applied).expect("encoding into a Vec cannot fail");
+        }
         let mut header = WIRE_VERSION << 3;
         header |= if self.complete { FLAG_COMPLETE } else { 0 };
-        header |= if clock.is_some() { FLAG_CLOCK } else { 0 };
-        header |= if applied.is_some() { FLAG_APPLIED } else { 0 };
-        out.push(header);
-        let mut encoded = postcard::to_extend(&wire, std::mem::take(out)).expect("encoding into a Vec cannot fail");
-        if let Some(clock) = clock {
-            encoded.extend_from_slice(&clock);
+        header |= if clock { FLAG_CLOCK } else { 0 };
+        header |= if applied { FLAG_APPLIED } else { 0 };
+        out[header_at] = header;
+    }
+}
+
+/// postcard output appended straight to the caller's buffer.
+struct Out<'a>(&'a mut Vec<u8>);
+
+impl postcard::ser_flavors::Flavor for Out<'_> {
+    type Output = ();
+
+    fn try_push(&mut self, byte: u8) -> postcard::Result<()> {
+        self.0.push(byte);
+        Ok(())
+    }
+
+    fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
+        // Most pieces are varints of a few bytes: copied inline, not through a `memcpy` call each.
+        if bytes.len() <= 16 {
+            self.0.reserve(bytes.len());
+            for &byte in bytes {
+                self.0.push(byte);
+            }
+        } else {
+            self.0.extend_from_slice(bytes);
         }
-        if let Some(applied) = applied {
-            encoded = postcard::to_extend(&applied, encoded).expect("encoding into a Vec cannot fail");
+        Ok(())
+    }
+
+    fn finalize(self) -> postcard::Result<()> {
+        Ok(())
+    }
+}
+
+type Ser<'a> = postcard::Serializer<Out<'a>>;
+
+/// Writes one item in postcard's encoding.
+fn put<T: Serialize + ?Sized>(ser: &mut Ser<'_>, item: &T) -> postcard::Result<()> {
+    item.serialize(ser)
+}
+
+/// Writes a list's length (postcard: a varint, as `usize`).
+fn put_len(ser: &mut Ser<'_>, len: usize) -> postcard::Result<()> {
+    put(ser, &len)
+}
+
+/// A causal context: version vector `(replica, counter)`, then out-of-order dots `(replica, counter)`.
+fn context(ser: &mut Ser<'_>, ctx: &CausalContext) -> postcard::Result<()> {
+    put_len(ser, ctx.version_vector().len())?;
+    for (replica, counter) in ctx.version_vector() {
+        put(ser, &(replica.0, *counter))?;
+    }
+    put_len(ser, ctx.cloud().len())?;
+    for dot in ctx.cloud() {
+        put(ser, &(dot.replica.0, dot.counter))?;
+    }
+    Ok(())
+}
+
+/// The body writer: knows the delta's origin (dots are written relative to it) and finds the highest value stamp.
+struct Body<'a> {
+    ser: Ser<'a>,
+    origin: Option<Origin>,
+    max_stamp: Stamp,
+}
+
+impl Body<'_> {
+    fn delta(&mut self, delta: &DeltaParts<'_>) -> postcard::Result<()> {
+        let origin = self.origin;
+        put(&mut self.ser, &origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)))?;
+        // The generated dots are implied by `origin`; the rest of the context travels explicitly.
+        let mut vv: SmallVec<[(u32, u64); 4]> = SmallVec::new();
+        for &(replica, counter) in delta.ctx.version_vector() {
+            match origin {
+                // The entry ends at the generated range: send only the part before it.
+                Some(o) if o.replica == replica && counter == o.last => {
+                    if o.first > 1 {
+                        vv.push((replica.0, o.first - 1));
+                    }
+                }
+                _ => vv.push((replica.0, counter)),
+            }
         }
-        *out = encoded;
+        put(&mut self.ser, vv.as_slice())?;
+        let generated =
+            |dot: &Dot| origin.is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter));
+        put_len(&mut self.ser, delta.ctx.cloud().iter().filter(|dot| !generated(dot)).count())?;
+        for dot in delta.ctx.cloud().iter().filter(|dot| !generated(dot)) {
+            put(&mut self.ser, &wire_dot(*dot, origin))?;
+        }
+
+        let store = delta.store;
+        put_len(&mut self.ser, store.tombstones.len())?;
+        for id in &store.tombstones {
+            put(&mut self.ser, &id.0)?;
+        }
+        put_len(&mut self.ser, store.nodes.len())?;
+        for (id, node) in &store.nodes {
+            put(&mut self.ser, &id.0)?;
+            put_len(&mut self.ser, node.core.values.len())?;
+            for entry in &node.core.values {
+                self.entry_head(entry)?;
+                put(&mut self.ser, &(entry.value.node_type.as_str(), entry.value.name.as_str()))?;
+            }
+            self.attrs(&node.attrs)?;
+        }
+        put_len(&mut self.ser, store.edges.len())?;
+        for (key, edge) in &store.edges {
+            put(&mut self.ser, &(key.from.0, key.to.0, key.edge_type.as_str()))?;
+            put_len(&mut self.ser, edge.presence.values.len())?;
+            for entry in &edge.presence.values {
+                // The value `()` takes no bytes.
+                self.entry_head(entry)?;
+            }
+            self.attrs(&edge.attrs)?;
+        }
+        Ok(())
+    }
+
+    /// An entry's dot and stamp (its value follows).
+    fn entry_head<T>(&mut self, entry: &Entry<T>) -> postcard::Result<()> {
+        self.max_stamp = self.max_stamp.max(entry.stamp);
+        put(&mut self.ser, &wire_dot(entry.dot, self.origin))?;
+        // A `[u8; 8]` is its 8 bytes in postcard: written in one piece rather than byte by byte.
+        self.ser.output.0.extend_from_slice(&entry.stamp.0.to_le_bytes());
+        Ok(())
+    }
+
+    fn attrs(&mut self, attrs: &Attrs) -> postcard::Result<()> {
+        put_len(&mut self.ser, attrs.len())?;
+        for (name, register) in attrs {
+            let name = match Dictionary::builtin_attr_code(name) {
+                Some(code) => WireName::Builtin(code),
+                None => WireName::Text(name.as_str()),
+            };
+            put(&mut self.ser, &name)?;
+            put_len(&mut self.ser, register.values.len())?;
+            for entry in &register.values {
+                self.entry_head(entry)?;
+                put(&mut self.ser, &entry.value)?;
+            }
+        }
+        Ok(())
     }
 }
 
 // ---------------------------------------------------------------------------------------------------------------
-// Wire structures.
-
-#[derive(Serialize, Deserialize)]
-struct WireDelta<'a> {
-    origin: Option<(u32, u64, u32)>,
-    vv: Vec<(u32, u64)>,
-    cloud: Vec<WireDot>,
-    tombstones: Vec<u64>,
-    #[serde(borrow)]
-    nodes: Vec<WireNode<'a>>,
-    #[serde(borrow)]
-    edges: Vec<WireEdge<'a>>,
-}
+// Wire items.
 
 /// A causal context on the wire: version vector `(replica, counter)`, then out-of-order dots.
 type WireContext = (Vec<(u32, u64)>, Vec<(u32, u64)>);
@@ -277,138 +422,17 @@ enum WireDot {
     Other(u32, u64),
 }
 
-#[derive(Serialize, Deserialize)]
-struct WireNode<'a> {
-    id: u64,
-    #[serde(borrow)]
-    core: Vec<WireEntry<(&'a str, &'a str)>>,
-    #[serde(borrow)]
-    attrs: Vec<WireRegister<'a>>,
-}
-
-#[derive(Serialize, Deserialize)]
-struct WireEdge<'a> {
-    from: u64,
-    to: u64,
-    edge_type: &'a str,
-    presence: Vec<WireEntry<()>>,
-    #[serde(borrow)]
-    attrs: Vec<WireRegister<'a>>,
-}
-
-#[derive(Serialize, Deserialize)]
-struct WireRegister<'a> {
-    #[serde(borrow)]
-    name: WireName<'a>,
-    values: Vec<WireEntry<Value>>,
-}
-
+/// An attribute name: a built-in name's code in the dictionary, or the text of any other.
 #[derive(Serialize, Deserialize)]
 enum WireName<'a> {
     Builtin(u16),
     Text(&'a str),
 }
 
-#[derive(Serialize, Deserialize)]
-struct WireEntry<T> {
-    dot: WireDot,
-    stamp: [u8; 8],
-    value: T,
-}
-
 fn wire_dot(dot: Dot, origin: Option<Origin>) -> WireDot {
     match origin {
         Some(o) if o.replica == dot.replica => WireDot::Same(dot.counter.wrapping_sub(o.first) as i64),
         _ => WireDot::Other(dot.replica.0, dot.counter),
-    }
-}
-
-fn to_wire<'d>(delta: &DeltaParts<'d>) -> WireDelta<'d> {
-    let origin = delta.origin;
-    let generated =
-        |dot: &Dot| origin.is_some_and(|o| o.replica == dot.replica && (o.first..=o.last).contains(&dot.counter));
-    // The generated dots are implied by `origin`; the rest of the context travels explicitly.
-    let mut vv = Vec::new();
-    let mut cloud = Vec::new();
-    for &(replica, counter) in delta.ctx.version_vector() {
-        match origin {
-            // The entry ends at the generated range: send only the part before it.
-            Some(o) if o.replica == replica && counter == o.last => {
-                if o.first > 1 {
-                    vv.push((replica.0, o.first - 1));
-                }
-            }
-            _ => vv.push((replica.0, counter)),
-        }
-    }
-    for dot in delta.ctx.cloud() {
-        if !generated(dot) {
-            cloud.push(wire_dot(*dot, origin));
-        }
-    }
-    let entries = |register: &Register<Value>| -> Vec<WireEntry<Value>> {
-        register
-            .values
-            .iter()
-            .map(|e| WireEntry { dot: wire_dot(e.dot, origin), stamp: e.stamp.0.to_le_bytes(), value: e.value.clone() })
-            .collect()
-    };
-    fn attrs<'d>(
-        attrs: &'d Attrs,
-        entries: &dyn Fn(&Register<Value>) -> Vec<WireEntry<Value>>,
-    ) -> Vec<WireRegister<'d>> {
-        attrs
-            .iter()
-            .map(|(name, register)| WireRegister {
-                name: match Dictionary::builtin_attr_code(name) {
-                    Some(code) => WireName::Builtin(code),
-                    None => WireName::Text(name.as_str()),
-                },
-                values: entries(register),
-            })
-            .collect()
-    }
-    WireDelta {
-        origin: origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)),
-        vv,
-        cloud,
-        tombstones: delta.store.tombstones.iter().map(|id| id.0).collect(),
-        nodes: delta
-            .store
-            .nodes
-            .iter()
-            .map(|(id, node)| WireNode {
-                id: id.0,
-                core: node
-                    .core
-                    .values
-                    .iter()
-                    .map(|e| WireEntry {
-                        dot: wire_dot(e.dot, origin),
-                        stamp: e.stamp.0.to_le_bytes(),
-                        value: (e.value.node_type.as_str(), e.value.name.as_str()),
-                    })
-                    .collect(),
-                attrs: attrs(&node.attrs, &entries),
-            })
-            .collect(),
-        edges: delta
-            .store
-            .edges
-            .iter()
-            .map(|(key, edge)| WireEdge {
-                from: key.from.0,
-                to: key.to.0,
-                edge_type: key.edge_type.as_str(),
-                presence: edge
-                    .presence
-                    .values
-                    .iter()
-                    .map(|e| WireEntry { dot: wire_dot(e.dot, origin), stamp: e.stamp.0.to_le_bytes(), value: () })
-                    .collect(),
-                attrs: attrs(&edge.attrs, &entries),
-            })
-            .collect(),
     }
 }
 
@@ -436,10 +460,12 @@ fn check_type_name(place: impl FnOnce() -> String, what: &str, name: &str) -> Re
     Ok(())
 }
 
-/// Turns wire structures back into a delta, checking them; knows the delta's origin and context.
+/// Checks the dots of a delta being decoded (it knows the delta's origin and context) and finds the highest value
+/// stamp.
 struct Decoder {
     origin: Option<Origin>,
     ctx: CausalContext,
+    max_stamp: Stamp,
 }
 
 impl Decoder {
@@ -485,27 +511,188 @@ impl Decoder {
         }
         Ok(dot)
     }
+}
 
-    fn entries<T>(&self, entries: Vec<WireEntry<T>>, place: &dyn Fn() -> String) -> Result<Register<T>, DeltaError> {
-        check_len(place, entries.len())?;
-        let mut values: SmallVec<[Entry<T>; 1]> = SmallVec::with_capacity(entries.len());
-        for (index, entry) in entries.into_iter().enumerate() {
+/// The largest capacity reserved for a list before its items have been read (a list's length is untrusted).
+const RESERVE_LIMIT: usize = 1 << 12;
+
+/// Reads the body of a delta item by item, straight into the store's types, with postcard's own deserializer
+/// (so every number and string is read as postcard reads it), checking each item as it comes.
+struct Reader<'de> {
+    de: postcard::Deserializer<'de, postcard::de_flavors::Slice<'de>>,
+    body_len: usize,
+}
+
+impl<'de> Reader<'de> {
+    /// Reads one item; `place` says where it is, for the error.
+    fn take<T: Deserialize<'de>, P: AsRef<str>>(&mut self, place: impl FnOnce() -> P) -> Result<T, DeltaError> {
+        T::deserialize(&mut self.de)
+            .map_err(|e| DeltaError::Encoding(format!("{}: {e} (body of {} bytes)", place().as_ref(), self.body_len)))
+    }
+
+    /// Reads a list's length, within [`MAX_ITEMS`].
+    fn len<P: AsRef<str>>(&mut self, place: impl Fn() -> P) -> Result<usize, DeltaError> {
+        let len: usize = self.take(&place)?;
+        check_len(place, len)?;
+        Ok(len)
+    }
+
+    /// A stamp (8 bytes, little-endian).
+    fn stamp<P: AsRef<str>>(&mut self, place: impl FnOnce() -> P) -> Result<Stamp, DeltaError> {
+        Ok(Stamp(u64::from_le_bytes(self.take::<[u8; 8], _>(place)?)))
+    }
+
+    /// The body: origin, context, tombstones, nodes, edges. Returns the delta (without its clock and applied
+    /// operations, which follow the body) and the highest value stamp.
+    fn delta(&mut self, complete: bool) -> Result<(Delta, Stamp), DeltaError> {
+        let origin = Decoder::origin(self.take(|| "origin")?)?;
+        let mut decoder = Decoder { origin, ctx: CausalContext::default(), max_stamp: Stamp(0) };
+        let vv: Vec<(u32, u64)> = self.take(|| "context version vector")?;
+        let cloud: Vec<WireDot> = self.take(|| "context dots")?;
+        check_len(|| "context", vv.len().saturating_add(cloud.len()))?;
+        let mut ctx_vv = Vec::with_capacity(vv.len());
+        for (replica, counter) in vv {
+            if replica == 0 {
+                return Err(invalid("context version vector", "replica id 0"));
+            }
+            ctx_vv.push((ReplicaId(replica), counter));
+        }
+        let mut ctx_cloud = Vec::with_capacity(cloud.len());
+        for (index, wire_dot) in cloud.into_iter().enumerate() {
+            ctx_cloud.push(decoder.dot(wire_dot, &|| format!("context dot {index}"))?);
+        }
+        decoder.ctx = CausalContext::from_parts(ctx_vv, ctx_cloud);
+        if let Some(o) = origin {
+            for generated in o.dots() {
+                decoder.ctx.insert(generated);
+            }
+        }
+
+        let tombstones: Vec<u64> = self.take(|| "tombstones")?;
+        check_len(|| "tombstones", tombstones.len())?;
+        if tombstones.contains(&0) {
+            return Err(invalid("tombstones", "node id 0"));
+        }
+        let tombstones = tombstones.into_iter().map(NodeId).collect();
+
+        // Entries usually come in key order (an encoder walks a sorted map); then they are collected in a list
+        // and the map is built from it in one go. Out of order, they go into the map one by one.
+        let count = self.len(|| "nodes")?;
+        let mut sorted: Vec<(NodeId, NodeEntry)> = Vec::with_capacity(count.min(RESERVE_LIMIT));
+        let mut unsorted: Option<BTreeMap<NodeId, NodeEntry>> = None;
+        for _ in 0..count {
+            let (id, entry) = self.node(&mut decoder)?;
+            if unsorted.is_none() && sorted.last().is_none_or(|(last, _)| *last < id) {
+                sorted.push((id, entry));
+                continue;
+            }
+            let map = unsorted.get_or_insert_with(|| std::mem::take(&mut sorted).into_iter().collect());
+            if map.insert(id, entry).is_some() {
+                return Err(limit(format!("node {id}"), "node listed twice"));
+            }
+        }
+        let nodes = unsorted.unwrap_or_else(|| sorted.into_iter().collect());
+
+        let count = self.len(|| "edges")?;
+        let mut sorted: Vec<(EdgeKey, EdgeEntry)> = Vec::with_capacity(count.min(RESERVE_LIMIT));
+        let mut unsorted: Option<BTreeMap<EdgeKey, EdgeEntry>> = None;
+        for _ in 0..count {
+            let (key, entry) = self.edge(&mut decoder)?;
+            if unsorted.is_none() && sorted.last().is_none_or(|(last, _)| *last < key) {
+                sorted.push((key, entry));
+                continue;
+            }
+            let map = unsorted.get_or_insert_with(|| std::mem::take(&mut sorted).into_iter().collect());
+            if map.contains_key(&key) {
+                return Err(limit(format!("edge {key}"), "edge listed twice"));
+            }
+            map.insert(key, entry);
+        }
+        let edges = unsorted.unwrap_or_else(|| sorted.into_iter().collect());
+
+        let store = Store { tombstones, nodes, edges };
+        let delta =
+            Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, applied: CausalContext::default(), store };
+        Ok((delta, decoder.max_stamp))
+    }
+
+    fn node(&mut self, decoder: &mut Decoder) -> Result<(NodeId, NodeEntry), DeltaError> {
+        let id: u64 = self.take(|| "node list")?;
+        if id == 0 {
+            return Err(invalid("node list", "node id 0"));
+        }
+        let owner = || format!("node {id}");
+        let count = self.len(owner)?;
+        let mut core = Register::default();
+        for index in 0..count {
+            let place = || format!("node {id} core value {index}");
+            let dot = self.take(place)?;
+            let stamp = self.stamp(place)?;
+            let (node_type, name): (&str, &str) = self.take(place)?;
+            let dot = decoder.stored_dot(dot, &place)?;
+            check_type_name(place, "node type", node_type)?;
+            if !crate::replica::valid_node_name(name) {
+                return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
+            }
+            if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == dot) {
+                return Err(limit(place(), format!("dot {dot} listed twice")));
+            }
+            decoder.max_stamp = decoder.max_stamp.max(stamp);
+            core.values.push(Entry {
+                dot,
+                stamp,
+                value: NodeCore { node_type: crate::dictionary::intern_type(node_type), name: Name::new(name) },
+            });
+        }
+        core.values.sort_unstable_by_key(|entry| entry.dot);
+        let attrs = self.attrs(decoder, &owner)?;
+        Ok((NodeId(id), NodeEntry { core, attrs }))
+    }
+
+    fn edge(&mut self, decoder: &mut Decoder) -> Result<(EdgeKey, EdgeEntry), DeltaError> {
+        let (from, to, edge_type): (u64, u64, &str) = self.take(|| "edge list")?;
+        let place = || format!("edge {from}->{to}");
+        if from == 0 || to == 0 {
+            return Err(invalid(place(), "node id 0"));
+        }
+        check_type_name(place, "edge type", edge_type)?;
+        let key = EdgeKey { from: NodeId(from), to: NodeId(to), edge_type: crate::dictionary::intern_type(edge_type) };
+        let owner = || format!("edge {key}");
+        let presence = self.entries(decoder, &|| format!("edge {key} presence"), |_, _| Ok(()))?;
+        let attrs = self.attrs(decoder, &owner)?;
+        Ok((key, EdgeEntry { presence, attrs }))
+    }
+
+    /// A register's entries: dot, stamp, value (read by `value`).
+    fn entries<T>(
+        &mut self,
+        decoder: &mut Decoder,
+        place: &dyn Fn() -> String,
+        mut value: impl FnMut(&mut Self, &dyn Fn() -> String) -> Result<T, DeltaError>,
+    ) -> Result<Register<T>, DeltaError> {
+        let count = self.len(place)?;
+        let mut values: SmallVec<[Entry<T>; 1]> = SmallVec::with_capacity(count.min(RESERVE_LIMIT));
+        for index in 0..count {
             let entry_place = || format!("{} value {index}", place());
-            let dot = self.stored_dot(entry.dot, &entry_place)?;
+            let dot = self.take(entry_place)?;
+            let stamp = self.stamp(entry_place)?;
+            let value = value(self, &entry_place)?;
+            let dot = decoder.stored_dot(dot, &entry_place)?;
             if values.iter().any(|e| e.dot == dot) {
                 return Err(limit(entry_place(), format!("dot {dot} listed twice")));
             }
-            values.push(Entry { dot, stamp: Stamp(u64::from_le_bytes(entry.stamp)), value: entry.value });
+            decoder.max_stamp = decoder.max_stamp.max(stamp);
+            values.push(Entry { dot, stamp, value });
         }
         values.sort_unstable_by_key(|entry| entry.dot);
         Ok(Register { values })
     }
 
-    fn attrs(&self, registers: Vec<WireRegister<'_>>, owner: &dyn Fn() -> String) -> Result<Attrs, DeltaError> {
-        check_len(owner, registers.len())?;
+    fn attrs(&mut self, decoder: &mut Decoder, owner: &dyn Fn() -> String) -> Result<Attrs, DeltaError> {
+        let count = self.len(owner)?;
         let mut attrs = Attrs::new();
-        for register in registers {
-            let name = match register.name {
+        for index in 0..count {
+            let name = match self.take(|| format!("{} attribute {index}", owner()))? {
                 WireName::Builtin(code) => crate::dictionary::interned_attr(code)
                     .ok_or_else(|| invalid(owner(), format!("unknown built-in attribute code {code}")))?,
                 WireName::Text(text) => {
@@ -514,132 +701,21 @@ impl Decoder {
                 }
             };
             let place = || format!("{} attribute {name:?}", owner());
-            let values = self.entries(register.values, &place)?;
-            if attrs.insert(name.clone(), values).is_some() {
-                return Err(limit(place(), "attribute listed twice"));
+            let values = self.entries(decoder, &place, |reader, place| reader.take::<Value, _>(place))?;
+            match attrs.entry(name) {
+                std::collections::btree_map::Entry::Vacant(slot) => {
+                    slot.insert(values);
+                }
+                std::collections::btree_map::Entry::Occupied(slot) => {
+                    return Err(limit(format!("{} attribute {:?}", owner(), slot.key()), "attribute listed twice"));
+                }
             }
         }
         Ok(attrs)
     }
-
-    fn node(&self, node: WireNode<'_>) -> Result<(NodeId, NodeEntry), DeltaError> {
-        let id = node.id;
-        if id == 0 {
-            return Err(invalid("node list", "node id 0"));
-        }
-        let owner = || format!("node {id}");
-        let mut core = Register::default();
-        check_len(owner, node.core.len())?;
-        for (index, entry) in node.core.into_iter().enumerate() {
-            let place = || format!("node {id} core value {index}");
-            let dot = self.stored_dot(entry.dot, &place)?;
-            let (node_type, name) = entry.value;
-            check_type_name(place, "node type", node_type)?;
-            if !crate::replica::valid_node_name(name) {
-                return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
-            }
-            if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == dot) {
-                return Err(limit(place(), format!("dot {dot} listed twice")));
-            }
-            core.values.push(Entry {
-                dot,
-                stamp: Stamp(u64::from_le_bytes(entry.stamp)),
-                value: NodeCore { node_type: crate::dictionary::intern_type(node_type), name: Name::new(name) },
-            });
-        }
-        core.values.sort_unstable_by_key(|entry| entry.dot);
-        let attrs = self.attrs(node.attrs, &owner)?;
-        Ok((NodeId(id), NodeEntry { core, attrs }))
-    }
-
-    fn edge(&self, edge: WireEdge<'_>) -> Result<(EdgeKey, EdgeEntry), DeltaError> {
-        let place = || format!("edge {}->{}", edge.from, edge.to);
-        if edge.from == 0 || edge.to == 0 {
-            return Err(invalid(place(), "node id 0"));
-        }
-        check_type_name(place, "edge type", edge.edge_type)?;
-        let key = EdgeKey {
-            from: NodeId(edge.from),
-            to: NodeId(edge.to),
-            edge_type: crate::dictionary::intern_type(edge.edge_type),
-        };
-        let owner = || format!("edge {key}");
-        let presence = self.entries(edge.presence, &|| format!("edge {key} presence"))?;
-        let attrs = self.attrs(edge.attrs, &owner)?;
-        Ok((key, EdgeEntry { presence, attrs }))
-    }
 }
 
-fn from_wire(
-    wire: WireDelta<'_>,
-    complete: bool,
-    clock: Option<[u8; 8]>,
-    applied: Option<WireContext>,
-) -> Result<Delta, DeltaError> {
-    let origin = Decoder::origin(wire.origin)?;
-    let mut decoder = Decoder { origin, ctx: CausalContext::default() };
-    check_len(|| "context", wire.vv.len().saturating_add(wire.cloud.len()))?;
-    let mut vv = Vec::with_capacity(wire.vv.len());
-    for (replica, counter) in &wire.vv {
-        if *replica == 0 {
-            return Err(invalid("context version vector", "replica id 0"));
-        }
-        vv.push((ReplicaId(*replica), *counter));
-    }
-    let mut cloud = Vec::with_capacity(wire.cloud.len());
-    for (index, wire_dot) in wire.cloud.iter().enumerate() {
-        cloud.push(decoder.dot(*wire_dot, &|| format!("context dot {index}"))?);
-    }
-    decoder.ctx = CausalContext::from_parts(vv, cloud);
-    if let Some(o) = origin {
-        for generated in o.dots() {
-            decoder.ctx.insert(generated);
-        }
-    }
-
-    let mut store = Store::default();
-    check_len(|| "tombstones", wire.tombstones.len())?;
-    for id in &wire.tombstones {
-        if *id == 0 {
-            return Err(invalid("tombstones", "node id 0"));
-        }
-        store.tombstones.insert(NodeId(*id));
-    }
-    check_len(|| "nodes", wire.nodes.len())?;
-    for node in wire.nodes {
-        let (id, entry) = decoder.node(node)?;
-        if store.nodes.insert(id, entry).is_some() {
-            return Err(limit(format!("node {id}"), "node listed twice"));
-        }
-    }
-    check_len(|| "edges", wire.edges.len())?;
-    for edge in wire.edges {
-        let (key, entry) = decoder.edge(edge)?;
-        if store.edges.contains_key(&key) {
-            return Err(limit(format!("edge {key}"), "edge listed twice"));
-        }
-        store.edges.insert(key, entry);
-    }
-    let applied = match applied {
-        None => CausalContext::default(),
-        Some((vv, cloud)) => {
-            check_len(|| "applied operations", vv.len().saturating_add(cloud.len()))?;
-            if vv.iter().chain(&cloud).any(|(replica, _)| *replica == 0) {
-                return Err(invalid("applied operations", "replica id 0"));
-            }
-            if cloud.iter().any(|(_, counter)| *counter == 0) {
-                return Err(invalid("applied operations", "dot counter 0"));
-            }
-            CausalContext::from_parts(
-                vv.into_iter().map(|(r, c)| (ReplicaId(r), c)).collect(),
-                cloud.into_iter().map(|(r, c)| Dot::new(ReplicaId(r), c)).collect(),
-            )
-        }
-    };
-    let mut delta = Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, applied, store };
-    delta.clock = match clock {
-        Some(bytes) => Stamp(u64::from_le_bytes(bytes)),
-        None => delta.max_value_stamp(),
-    };
-    Ok(delta)
-}
+#[cfg(test)]
+mod reference;
+#[cfg(test)]
+mod wire_tests;

@@ -17,7 +17,7 @@ use crate::error::{DeltaError, DictionaryError, OpError};
 use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
 use crate::mutants::{DsrMutant, Plant};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store, drop_covered_attrs, join_attrs};
-use crate::value::{AttrType, Value};
+use crate::value::{AttrType, Value, ValueType};
 
 /// Whether `name` is acceptable as a node name: 1 to 255 bytes, no control characters, no `#`.
 pub fn valid_node_name(name: &str) -> bool {
@@ -745,35 +745,53 @@ impl Replica {
         self.ctx.merge(&ctx);
         self.clock = self.clock.max(clock);
         self.applied.merge(&applied);
-        let edge_keys: Vec<EdgeKey> = self.store.edges.keys().cloned().collect();
-        self.reindex_edges(&edge_keys);
-        let node_ids: Vec<NodeId> = self.store.nodes.keys().copied().collect();
-        self.reindex_names(&node_ids);
-        if self.changes.is_some() {
+
+        // The indices, built in one go from the sorted store (they were empty, as the replica held nothing). What
+        // the general join's `reindex_edges` and `reindex_names` would leave: every edge entry under both of its
+        // endpoints, and every visible node under its winning core's name and stamp.
+        let node_visible: Vec<bool> = self.store.nodes.keys().map(|id| self.node_visible(*id)).collect();
+        let edge_visible: Vec<bool> = self.store.edges.iter().map(|(key, e)| self.edge_entry_visible(key, e)).collect();
+        debug_assert!(self.out_edges.is_empty() && self.in_edges.is_empty() && self.names.is_empty());
+        self.out_edges = group_sorted(self.store.edges.keys().map(|key| (key.from, key.clone())));
+        let mut by_target: Vec<(NodeId, EdgeKey)> = self.store.edges.keys().map(|key| (key.to, key.clone())).collect();
+        by_target.sort_unstable();
+        self.in_edges = group_sorted(by_target.into_iter());
+        let mut named: Vec<(Name, (Stamp, NodeId))> = Vec::with_capacity(self.store.nodes.len());
+        let mut indexed: Vec<(NodeId, (Name, Stamp))> = Vec::with_capacity(self.store.nodes.len());
+        for ((&id, node), _) in self.store.nodes.iter().zip(&node_visible).filter(|(_, visible)| **visible) {
+            let core = node.core.winner_planted(self.plant).expect("a visible node has a core");
+            named.push((core.value.name.clone(), (core.stamp, id)));
+            indexed.push((id, (core.value.name.clone(), core.stamp)));
+        }
+        named.sort_unstable();
+        self.names = group_sorted(named.into_iter());
+        self.indexed_names = indexed.into_iter().collect();
+
+        if let Some(mut queue) = self.changes.take() {
             // Nothing was visible before: every visible node and edge is inserted, then every winning attribute
             // of a visible element is updated, in the general join's order (nodes, edges, then attributes by
             // element and name).
-            let mut events = Vec::new();
-            let mut push = |change| events.push(ChangeEvent { change, origin: None });
-            for &id in self.store.nodes.keys().filter(|id| self.node_visible(**id)) {
-                push(Change::NodeInserted { id });
+            let nodes = || self.store.nodes.iter().zip(&node_visible).filter(|(_, v)| **v).map(|(node, _)| node);
+            let edges = || self.store.edges.iter().zip(&edge_visible).filter(|(_, v)| **v).map(|(edge, _)| edge);
+            let count = nodes().map(|(_, node)| 1 + node.attrs.len()).sum::<usize>()
+                + edges().map(|(_, edge)| 1 + edge.attrs.len()).sum::<usize>();
+            queue.reserve(count);
+            let event = |change| ChangeEvent { change, origin: None };
+            queue.extend(nodes().map(|(&id, _)| event(Change::NodeInserted { id })));
+            queue.extend(edges().map(|(key, _)| event(Change::EdgeInserted { key: key.clone() })));
+            for (&id, node) in nodes() {
+                queue.extend(
+                    node.attrs
+                        .keys()
+                        .map(|name| event(Change::AttrUpdated { element: Element::Node(id), name: name.clone() })),
+                );
             }
-            for key in self.store.edges.keys().filter(|key| self.edge_visible(key)) {
-                push(Change::EdgeInserted { key: key.clone() });
+            for (key, edge) in edges() {
+                queue.extend(edge.attrs.keys().map(|name| {
+                    event(Change::AttrUpdated { element: Element::Edge(key.clone()), name: name.clone() })
+                }));
             }
-            for (&id, node) in self.store.nodes.iter().filter(|(id, _)| self.node_visible(**id)) {
-                for name in node.attrs.keys() {
-                    push(Change::AttrUpdated { element: Element::Node(id), name: name.clone() });
-                }
-            }
-            for (key, edge) in self.store.edges.iter().filter(|(key, _)| self.edge_visible(key)) {
-                for name in edge.attrs.keys() {
-                    push(Change::AttrUpdated { element: Element::Edge(key.clone()), name: name.clone() });
-                }
-            }
-            if let Some(queue) = self.changes.as_mut() {
-                queue.extend(events);
-            }
+            self.changes = Some(queue);
         }
         #[cfg(feature = "check-invariants")]
         self.check_invariants().expect("invariants after installing a snapshot");
@@ -804,12 +822,20 @@ impl Replica {
     }
 
     /// Checks every name and type of a delta against the dictionary, changing nothing.
-    fn check_names(&self, delta: &Delta) -> Result<(), DeltaError> {
-        let attrs = |attrs: &Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
+    ///
+    /// A snapshot repeats a few types and attribute names over many nodes: a type, or a known attribute name with its
+    /// type, that has passed once is remembered (a few of them) and not looked up again, since the check is a pure
+    /// function of the unchanged dictionary.
+    fn check_names<'d>(&self, delta: &'d Delta) -> Result<(), DeltaError> {
+        let mut passed_attrs: SmallVec<[(&Name, ValueType); 16]> = SmallVec::new();
+        let mut attrs = |attrs: &'d Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
             let mut first_types = BTreeMap::new();
             for (name, register) in attrs {
                 for entry in &register.values {
                     let ty = entry.value.value_type();
+                    if passed_attrs.iter().any(|(passed, passed_ty)| *passed_ty == ty && passed.same(name)) {
+                        continue;
+                    }
                     let place = || format!("{} attribute {name:?}", owner());
                     self.dictionary
                         .peek_attr(name, ty)
@@ -817,6 +843,9 @@ impl Replica {
                     // Two values of different types for one unknown name within a delta is a conflict too (a known
                     // name's type was just checked, so only unknown names need remembering).
                     if self.dictionary.attr_type(name).is_some() {
+                        if passed_attrs.len() < passed_attrs.inline_size() {
+                            passed_attrs.push((name, ty));
+                        }
                         continue;
                     }
                     if let Some(first) = first_types.insert(name.clone(), ty).filter(|first| *first != ty) {
@@ -833,18 +862,32 @@ impl Replica {
             }
             Ok(())
         };
+        let mut passed_types: SmallVec<[&Name; 8]> = SmallVec::new();
         for (id, node) in &delta.store.nodes {
             for core in &node.core.values {
+                let node_type = &core.value.node_type;
+                if passed_types.iter().any(|passed| passed.same(node_type)) {
+                    continue;
+                }
                 self.dictionary
-                    .peek_node_type(&core.value.node_type)
+                    .peek_node_type(node_type)
                     .map_err(|source| DeltaError::Dictionary { place: format!("node {id}"), source })?;
+                if passed_types.len() < passed_types.inline_size() {
+                    passed_types.push(node_type);
+                }
             }
             attrs(&node.attrs, &|| format!("node {id}"))?;
         }
+        passed_types.clear();
         for (key, edge) in &delta.store.edges {
-            self.dictionary
-                .peek_edge_type(&key.edge_type)
-                .map_err(|source| DeltaError::Dictionary { place: format!("edge {key}"), source })?;
+            if !passed_types.iter().any(|passed| passed.same(&key.edge_type)) {
+                self.dictionary
+                    .peek_edge_type(&key.edge_type)
+                    .map_err(|source| DeltaError::Dictionary { place: format!("edge {key}"), source })?;
+                if passed_types.len() < passed_types.inline_size() {
+                    passed_types.push(&key.edge_type);
+                }
+            }
             attrs(&edge.attrs, &|| format!("edge {key}"))?;
         }
         Ok(())
@@ -1322,6 +1365,18 @@ fn normalize_attrs(attrs: &mut Attrs) {
         normalize_register(register);
         !register.is_empty()
     });
+}
+
+/// A map of sets from `(key, item)` pairs sorted by key then item, each built in one go.
+fn group_sorted<K: Ord, T: Ord>(pairs: impl Iterator<Item = (K, T)>) -> BTreeMap<K, BTreeSet<T>> {
+    let mut groups: Vec<(K, Vec<T>)> = Vec::new();
+    for (key, item) in pairs {
+        match groups.last_mut() {
+            Some((last, items)) if *last == key => items.push(item),
+            _ => groups.push((key, vec![item])),
+        }
+    }
+    groups.into_iter().map(|(key, items)| (key, items.into_iter().collect())).collect()
 }
 
 /// Registers the names of a delta that passed [`Replica::check_names`] (only needed when unknown names are allowed).

@@ -413,6 +413,16 @@ mod f32_slice {
     use super::*;
 
     pub fn serialize<S: serde::Serializer>(values: &Arc<[f32]>, serializer: S) -> Result<S::Ok, S::Error> {
+        // Short vectors (an RT edge's three values) go through a stack buffer, not an allocation.
+        const SHORT: usize = 16;
+        if values.len() <= SHORT {
+            let mut bytes = [[0u8; 4]; SHORT];
+            for (chunk, value) in bytes.iter_mut().zip(values.iter()) {
+                *chunk = value.to_le_bytes();
+            }
+            let bytes = bytes.as_flattened();
+            return serializer.serialize_bytes(&bytes[..values.len() * 4]);
+        }
         let mut bytes = Vec::with_capacity(values.len() * 4);
         for value in values.iter() {
             bytes.extend_from_slice(&value.to_le_bytes());
@@ -445,6 +455,15 @@ mod u64_slice {
     use super::*;
 
     pub fn serialize<S: serde::Serializer>(values: &Arc<[u64]>, serializer: S) -> Result<S::Ok, S::Error> {
+        const SHORT: usize = 8;
+        if values.len() <= SHORT {
+            let mut bytes = [[0u8; 8]; SHORT];
+            for (chunk, value) in bytes.iter_mut().zip(values.iter()) {
+                *chunk = value.to_le_bytes();
+            }
+            let bytes = bytes.as_flattened();
+            return serializer.serialize_bytes(&bytes[..values.len() * 8]);
+        }
         let mut bytes = Vec::with_capacity(values.len() * 8);
         for value in values.iter() {
             bytes.extend_from_slice(&value.to_le_bytes());

@@ -263,3 +263,36 @@ fn only_a_fresh_replica_and_a_snapshot_take_the_fast_path() {
     used.apply(&delta).unwrap();
     assert!(!used.can_install(&writer.snapshot()), "a replica that holds something joins the general way");
 }
+
+/// `check_names` remembers the names and types that passed; a known name with another type, an unknown type, or
+/// (with unknown names allowed) an unknown name with two types, later in a snapshot, is still refused, the same way
+/// as by the general join, and the replica is unchanged.
+#[test]
+fn names_that_fail_after_names_that_passed_are_refused() {
+    for case in 0..3 {
+        let dictionary = if case == 2 { Dictionary::permissive() } else { Dictionary::builtin() };
+        let mut writer = Replica::with_dictionary(ReplicaId(1), dictionary.clone());
+        let attr = if case == 2 { "custom" } else { "pos_x" };
+        let mut last = NodeId(0);
+        for (i, name) in ["a", "b", "c"].into_iter().enumerate() {
+            let node = NewNode::new("object", name).with_attr(attr, i as f32);
+            last = writer.insert_node(i as u64 + 1, node).unwrap().0;
+        }
+        let mut snapshot = writer.snapshot();
+        let node = snapshot.store.nodes.get_mut(&last).unwrap();
+        match case {
+            1 => node.core.values[0].value.node_type = Name::from("no_such_type"),
+            _ => node.attrs.get_mut(attr).unwrap().values[0].value = Value::I32(7),
+        }
+        let fresh = || Replica::with_dictionary(ReplicaId(2), dictionary.clone());
+        let mut general = fresh();
+        let general_error = general.apply_inner(&snapshot, || Arc::new(snapshot.clone())).unwrap_err();
+        let mut fast = fresh();
+        let fast_error = fast.apply(&snapshot).unwrap_err();
+        assert_eq!(fast_error, general_error, "case {case}");
+        assert_eq!(fast, fresh(), "case {case}: the replica is unchanged");
+        if case != 2 {
+            assert!(fast_error.to_string().contains(&format!("node {last}")), "case {case}: {fast_error}");
+        }
+    }
+}
