@@ -432,6 +432,7 @@ fn settled_replicas(setup: &Setup, state: &State) -> Vec<Replica> {
                         continue;
                     }
                     let missing = replicas[from].missing_for(replicas[to].applied());
+                    let snapshot = matches!(missing, Missing::Snapshot).then(|| replicas[from].snapshot());
                     let target = &mut replicas[to];
                     match missing {
                         Missing::UpToDate => {}
@@ -440,8 +441,10 @@ fn settled_replicas(setup: &Setup, state: &State) -> Vec<Replica> {
                                 let _ = target.apply_shared(delta);
                             }
                         }
-                        Missing::Snapshot(snapshot) => {
-                            let _ = target.apply(&snapshot);
+                        Missing::Snapshot => {
+                            if let Some(snapshot) = snapshot {
+                                let _ = target.apply(&snapshot);
+                            }
                         }
                     }
                 }

@@ -1013,7 +1013,7 @@ impl<T: Transport> Inner<T> {
                             replies.extend(self.batches(from, &deltas));
                             None
                         }
-                        Missing::Snapshot(_) => state.snapshot_bytes(),
+                        Missing::Snapshot => state.snapshot_bytes(),
                     };
                     if let Some(snapshot) = snapshot {
                         replies.push((Channel::Sync, Message::Snapshot { from: me, to: from, snapshot }));

@@ -111,8 +111,10 @@ pub enum Missing {
     UpToDate,
     /// These deltas, joined in any order, give the peer everything it lacks.
     Deltas(Vec<Arc<Delta>>),
-    /// The retained history does not cover what the peer lacks: send the whole state.
-    Snapshot(Delta),
+    /// The retained history does not cover what the peer lacks: send the whole state ([`Replica::snapshot`], or its
+    /// bytes straight from the replica with [`Replica::encode_snapshot`]; neither is made here, so a caller that
+    /// sends bytes does not pay for a copy of the store it would throw away).
+    Snapshot,
 }
 
 /// Limits on the history kept for anti-entropy.
@@ -1170,7 +1172,7 @@ impl Replica {
     /// deltas, or (when the retained history does not cover the gap) a snapshot.
     pub fn missing_for(&self, peer: &CausalContext) -> Missing {
         let Some(missing) = self.applied.missing_from(peer, self.log.deltas.len().max(1) * 4) else {
-            return Missing::Snapshot(self.snapshot());
+            return Missing::Snapshot;
         };
         if missing.is_empty() {
             return Missing::UpToDate;
@@ -1185,7 +1187,7 @@ impl Replica {
             }
         }
         if !missing.iter().all(|dot| covered.contains(dot)) {
-            return Missing::Snapshot(self.snapshot());
+            return Missing::Snapshot;
         }
         if self.plant.is(DsrMutant::AntiEntropySkipsLastDelta) {
             selected.pop();

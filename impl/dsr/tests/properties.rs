@@ -257,7 +257,10 @@ proptest! {
                                 world.deliver(to, &d);
                             }
                         }
-                        dsr::Missing::Snapshot(s) => world.deliver(to, &s),
+                        dsr::Missing::Snapshot => {
+                            let snapshot = world.replicas[from].snapshot();
+                            world.deliver(to, &snapshot);
+                        }
                     }
                 }
             }
