@@ -393,7 +393,9 @@ impl<T: Transport + 'static> Agent<T> {
         Ok(Agent { inner: Arc::new(inner), threads: Mutex::new(Vec::new()) })
     }
 
-    /// An agent with its own receiving thread, which handles samples as they arrive and does the periodic work.
+    /// An agent that runs on its own: samples are handled as they arrive — on the transport's receiving thread
+    /// where the transport offers one ([`Transport::set_sink`], RTPS does), else on the agent's own thread — and
+    /// the agent's thread does the periodic work (announces, join retries, call replies).
     ///
     /// # Errors
     /// As [`Agent::new`], and [`AgentError::Thread`].
@@ -433,6 +435,12 @@ impl<T: Transport + 'static> Agent<T> {
             })
             .map_err(|e| AgentError::Thread { agent: agent.inner.config.id, detail: e.to_string() })?;
         agent.threads.lock().unwrap_or_else(|p| p.into_inner()).push(handle);
+        // Where the transport can, samples are handled on its receiving thread as they arrive: one thread hand-off
+        // less per sample than through the loop above, which then only does the periodic work (and handles what
+        // was queued before). The sink holds the agent's state; `shutdown` clears it.
+        let inner = Arc::clone(&agent.inner);
+        let sink: transport::Sink = Arc::new(move |sample| inner.handle(sample));
+        agent.inner.transport.set_sink(Some(sink));
         Ok(agent)
     }
 
@@ -473,9 +481,12 @@ impl<T: Transport + 'static> Agent<T> {
         }
     }
 
-    /// Stops the receiving thread (if any) and waits for it.
+    /// Stops the agent's threads (if any) and the handling of samples on the transport's receiving thread, and
+    /// waits for both.
     pub fn shutdown(&self) {
         self.inner.stop.store(true, Ordering::SeqCst);
+        // Waits for a sample being handled on the transport's thread, and releases the sink's hold on the state.
+        self.inner.transport.set_sink(None);
         let handles = std::mem::take(&mut *self.threads.lock().unwrap_or_else(|p| p.into_inner()));
         for handle in handles {
             let _ = handle.join();

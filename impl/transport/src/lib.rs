@@ -158,7 +158,22 @@ pub trait Transport: Send + Sync {
     fn sync_matches(&self) -> u64 {
         0
     }
+
+    /// Asks the transport to hand every sample it receives from now on to `sink`, called on the transport's own
+    /// receiving thread in arrival order, instead of queueing it for [`Transport::try_recv`]: a receiver that
+    /// handles samples at once saves a thread hand-off per sample. `sink` must not block for long (the transport
+    /// reads nothing else meanwhile). `None` goes back to queueing; it returns once no call of the old sink is
+    /// running, so whatever the sink holds can be released safely afterwards. Returns `false`, changing nothing,
+    /// when the transport has no receiving thread of its own (the in-process bus; the fault injector, which times
+    /// deliveries itself): the caller then keeps polling. Samples queued before the call stay queued.
+    fn set_sink(&self, sink: Option<Sink>) -> bool {
+        let _ = sink;
+        false
+    }
 }
+
+/// A receiver of samples, called on a transport's receiving thread (see [`Transport::set_sink`]).
+pub type Sink = Arc<dyn Fn(Sample) + Send + Sync>;
 
 impl<T: Transport + ?Sized> Transport for Arc<T> {
     fn local_id(&self) -> EndpointId {
@@ -181,6 +196,9 @@ impl<T: Transport + ?Sized> Transport for Arc<T> {
     }
     fn sync_matches(&self) -> u64 {
         (**self).sync_matches()
+    }
+    fn set_sink(&self, sink: Option<Sink>) -> bool {
+        (**self).set_sink(sink)
     }
 }
 

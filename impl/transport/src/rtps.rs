@@ -87,7 +87,9 @@ use rustdds::{
     QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, StatusEvented, TopicKind, WriteOptionsBuilder,
 };
 
-use crate::{Channel, Clock, Counters, EndpointId, Sample, SystemClock, Transport, TransportError, TransportStats};
+use crate::{
+    Channel, Clock, Counters, EndpointId, Sample, Sink, SystemClock, Transport, TransportError, TransportStats,
+};
 
 /// When discovery reached each step, in wall-clock nanoseconds since the Unix epoch ([`SystemClock`], so times of
 /// different processes on one host compare); `None` until it happens.
@@ -411,6 +413,8 @@ pub struct RtpsTransport {
     /// The best-effort updates writer and the largest sample it takes ([`UpdateDelivery::BestEffort`]).
     best_effort: Option<(Mutex<Writer>, usize)>,
     inbox: Receiver<Sample>,
+    /// Where received samples go instead of the inbox, while set ([`Transport::set_sink`]); locked during a call.
+    sink: Arc<Mutex<Option<Sink>>>,
     stop: Arc<AtomicBool>,
     receiver: Option<JoinHandle<()>>,
     counters: Arc<Counters>,
@@ -547,6 +551,7 @@ impl RtpsTransport {
         statuses.extend(subscribing.as_ref().map(DomainParticipant::status_listener));
         let reading_prefix = prefix_of(subscribing.as_ref().unwrap_or(&publishing).guid());
         let (sender, inbox) = bounded(config.inbox_capacity.max(1));
+        let sink = Arc::new(Mutex::new(None));
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(Counters::default());
         let receiver = {
@@ -554,15 +559,17 @@ impl RtpsTransport {
             let counters = Arc::clone(&counters);
             let own = vec![prefix_of(publishing.guid()), reading_prefix];
             let watch = DiscoveryWatch { statuses, own, endpoints, state: Arc::clone(&discovery) };
+            let outlet = Outlet { inbox: sender, sink: Arc::clone(&sink), counters };
             std::thread::Builder::new()
                 .name("rtps-receive".into())
-                .spawn(move || receive_loop(readers, watch, sender, stop, counters, local))
+                .spawn(move || receive_loop(readers, watch, outlet, stop, local))
                 .map_err(|e| TransportError::Setup { what: "receiving thread".into(), detail: e.to_string() })?
         };
         Ok(RtpsTransport {
             writers,
             best_effort,
             inbox,
+            sink,
             stop,
             receiver: Some(receiver),
             counters,
@@ -677,12 +684,46 @@ impl Drop for RtpsTransport {
     }
 }
 
+/// Where the receiving thread puts samples: the sink once one is set, else the bounded inbox.
+struct Outlet {
+    inbox: Sender<Sample>,
+    sink: Arc<Mutex<Option<Sink>>>,
+    counters: Arc<Counters>,
+}
+
+impl Outlet {
+    /// Hands `sample` on; `false` when the transport is stopping or its inbox is gone.
+    fn pass(&self, mut sample: Sample, stop: &AtomicBool) -> bool {
+        {
+            // Held during the call, so that clearing the sink waits for the call to end.
+            let sink = self.sink.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some(sink) = sink.as_ref() {
+                self.counters.received(sample.bytes.len());
+                sink(sample);
+                return true;
+            }
+        }
+        // Bounded inbox: wait (back-pressure) but notice a stop request.
+        loop {
+            match self.inbox.send_timeout(sample, Duration::from_millis(50)) {
+                Ok(()) => return true,
+                Err(SendTimeoutError::Timeout(back)) => {
+                    if stop.load(Ordering::Relaxed) {
+                        return false;
+                    }
+                    sample = back;
+                }
+                Err(SendTimeoutError::Disconnected(_)) => return false,
+            }
+        }
+    }
+}
+
 fn receive_loop(
     mut readers: Vec<(Channel, Reader)>,
     mut watch: DiscoveryWatch,
-    sender: Sender<Sample>,
+    outlet: Outlet,
     stop: Arc<AtomicBool>,
-    counters: Arc<Counters>,
     local: EndpointId,
 ) {
     use rustdds::mio1::{Events, Interest, Poll, Token};
@@ -730,26 +771,15 @@ fn receive_loop(
                         if *channel == Channel::Sync && watch.state.learn_reading_prefix(origin, &bytes) {
                             continue;
                         }
-                        let mut sample = Sample { channel: *channel, origin, bytes };
-                        // Bounded inbox: wait (back-pressure) but notice a stop request.
-                        loop {
-                            match sender.send_timeout(sample, Duration::from_millis(50)) {
-                                Ok(()) => break,
-                                Err(SendTimeoutError::Timeout(back)) => {
-                                    if stop.load(Ordering::Relaxed) {
-                                        return;
-                                    }
-                                    sample = back;
-                                }
-                                Err(SendTimeoutError::Disconnected(_)) => return,
-                            }
+                        if !outlet.pass(Sample { channel: *channel, origin, bytes }, &stop) {
+                            return;
                         }
                     }
                     Ok(None) => break,
                     Err(error) => {
                         // A sample rustdds could not decode (foreign type on our topic): logged and skipped.
                         tracing::warn!("rtps receive on {}: dropped an undecodable sample: {error:?}", channel.name());
-                        counters.dropped_full();
+                        outlet.counters.dropped_full();
                         break;
                     }
                 }
@@ -787,6 +817,11 @@ impl Transport for RtpsTransport {
 
     fn sync_matches(&self) -> u64 {
         self.discovery.sync_matches.load(Ordering::Acquire)
+    }
+
+    fn set_sink(&self, sink: Option<Sink>) -> bool {
+        *self.sink.lock().unwrap_or_else(|p| p.into_inner()) = sink;
+        true
     }
 }
 

@@ -122,6 +122,34 @@ fn best_effort_updates_carry_small_samples_unacknowledged_and_large_ones_reliabl
     assert_eq!(sent, expected as u64, "small samples are counted without a heartbeat, large ones with one");
 }
 
+#[test]
+fn a_sink_gets_samples_on_the_receiving_thread_until_it_is_cleared() {
+    let prefix = format!("sink{}", std::process::id());
+    let a = RtpsTransport::new(config(&prefix)).unwrap();
+    let b = RtpsTransport::new(config(&prefix)).unwrap();
+    wait_for_match(&a, &b);
+    let (tx, rx) = std::sync::mpsc::channel();
+    let tx = std::sync::Mutex::new(tx);
+    let sink: transport::Sink = std::sync::Arc::new(move |sample: transport::Sample| {
+        let on = std::thread::current().name().map(str::to_owned);
+        let _ = tx.lock().unwrap().send((sample, on));
+    });
+    let received = b.stats().samples_received;
+    assert!(b.set_sink(Some(sink)));
+    a.publish(Channel::Updates, Bytes::from_static(b"to the sink")).unwrap();
+    let (sample, thread) = rx.recv_timeout(Duration::from_secs(10)).expect("the sink got the sample");
+    assert_eq!(&sample.bytes[..], b"to the sink");
+    assert_eq!(thread.as_deref(), Some("rtps-receive"));
+    assert!(b.try_recv().is_none(), "nothing was queued");
+    assert_eq!(b.stats().samples_received, received + 1, "samples handed to the sink are counted");
+    // Cleared: samples are queued again.
+    assert!(b.set_sink(None));
+    a.publish(Channel::Updates, Bytes::from_static(b"to the inbox")).unwrap();
+    let queued = b.recv_timeout(Duration::from_secs(10)).expect("queued again");
+    assert_eq!(&queued.bytes[..], b"to the inbox");
+    assert!(rx.try_recv().is_err());
+}
+
 /// The SICK TiM7xx log's two deltas (sequence number included): each goes as several DATA_FRAG datagrams.
 const SENSOR_SAMPLE_BYTES: [usize; 2] = [9_853, 13_115];
 
