@@ -233,9 +233,12 @@ struct Summary {
     /// Over RTPS: each agent's graph at the end, the bridge first.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     agent_reports: Vec<measure::roles::AgentRow>,
-    /// Over RTPS: milliseconds from the end of the replay until every agent had the bridge's digest.
+    /// Over RTPS: milliseconds from the quiesce (every writer stopped) until every agent had the bridge's digest.
     #[serde(skip_serializing_if = "Option::is_none")]
     converged_ms: Option<f64>,
+    /// Over RTPS: milliseconds from the end of the replay to the quiesce (the roles' statistics fetched meanwhile).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    quiesced_after_ms: Option<f64>,
     /// What `--out` recorded (in-process runs).
     recording: Option<Recording>,
 }
@@ -394,6 +397,7 @@ fn summary(
         faults: None,
         agent_reports: Vec::new(),
         converged_ms: None,
+        quiesced_after_ms: None,
         recording: None,
     }
 }
@@ -443,6 +447,7 @@ fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
         faults: args.faults.map(|f| f.to_spec()),
         agent_reports: outcome.agents.clone(),
         converged_ms: outcome.converged_ms,
+        quiesced_after_ms: Some(outcome.quiesced_after_ms),
         recording: outcome.recorded.map(|(path, messages)| Recording {
             path: path.display().to_string(),
             messages,
@@ -527,7 +532,9 @@ fn text(s: &Summary) -> String {
     if let Some(ms) = s.converged_ms {
         let _ = writeln!(
             out,
-            "  converged     every agent had the bridge's digest {ms:.1} ms after the replay ended (status every 100 ms)"
+            "  converged     every agent had the bridge's digest {ms:.1} ms after the writers stopped (status every \
+             100 ms; the roles were quiesced {:.1} ms after the replay ended, their statistics fetched meanwhile)",
+            s.quiesced_after_ms.unwrap_or(0.0)
         );
     }
     let verdict = if s.digests_equal { "equal" } else { "DIFFER" };

@@ -5,8 +5,9 @@
 //! The sequence: the bridge agent starts alone on a fresh topic prefix (its own empty graph after a short wait);
 //! the agent processes start with `--control-stdin --json-status` and report ready once they hold the graph; the
 //! log is played at its pace; then every role is told to `quiesce` (its runtime stops writing, the agent keeps
-//! replicating) and the command waits until every agent reports the bridge's digest — the time from the end of
-//! the replay to that moment is the end-of-replay convergence window. Just before the quiesce, the bridge asks
+//! replicating) and the command waits until every agent reports the bridge's digest — the time from the quiesce,
+//! when every writer has stopped, to that moment is the end-of-replay convergence window. Just before the quiesce,
+//! the bridge asks
 //! every role for its BICA statistics (`runtime.components`, a remote call over the same DDS engine): frequency
 //! achieved, misses, skipped releases, lateness. Closing the processes' standard input stops them.
 
@@ -83,8 +84,11 @@ pub struct RtpsOutcome {
     pub agents: Vec<AgentRow>,
     /// Whether every agent reported the bridge's digest.
     pub digests_equal: bool,
-    /// Milliseconds from the end of the replay until every agent reported the bridge's digest.
+    /// Milliseconds from the quiesce (the roles told to stop writing; the bridge had finished the log) until every
+    /// agent reported the bridge's digest: the window from the last writes to convergence.
     pub converged_ms: Option<f64>,
+    /// Milliseconds from the end of the replay to the quiesce: fetching the roles' statistics by remote calls.
+    pub quiesced_after_ms: f64,
     /// The MCAP file written and its messages per topic, if asked.
     pub recorded: Option<(std::path::PathBuf, measure::record::RecordCounts)>,
 }
@@ -295,7 +299,9 @@ pub fn replay(
             let _ = writeln!(stdin, "quiesce");
         }
     }
-    let deadline = ended + config.settle;
+    let quiesced = Instant::now();
+    let quiesced_after_ms = quiesced.duration_since(ended).as_secs_f64() * 1e3;
+    let deadline = quiesced + config.settle;
     let mut converged_ms = None;
     // Statuses printed after the quiesce only: the roles may still have been writing before it.
     last.clear();
@@ -304,7 +310,7 @@ pub fn replay(
         last.insert(id, status);
         let Some(target) = bridge.digest().map(|d| d.to_string()) else { continue };
         if last.len() == procs.len() && last.values().all(|s| s["digest"].as_str() == Some(target.as_str())) {
-            converged_ms = Some(ended.elapsed().as_secs_f64() * 1e3);
+            converged_ms = Some(quiesced.elapsed().as_secs_f64() * 1e3);
             break;
         }
     }
@@ -341,7 +347,7 @@ pub fn replay(
     drop(procs);
     bridge.shutdown();
     let digests_equal = agents.iter().all(|a| a.digest == agents[0].digest);
-    Ok(RtpsOutcome { played, seconds, bridge_bytes, agents, digests_equal, converged_ms, recorded })
+    Ok(RtpsOutcome { played, seconds, bridge_bytes, agents, digests_equal, converged_ms, quiesced_after_ms, recorded })
 }
 
 #[cfg(test)]

@@ -36,6 +36,12 @@ pub struct AgentConfig {
     pub join_retry: Duration,
     /// How often to announce the causal context (anti-entropy).
     pub announce_period: Duration,
+    /// After this long without a local write, announce once more, out of period: a peer that lost this agent's
+    /// last writes (which no later delta of it reveals as a gap) asks for them then, not at the next periodic
+    /// announce. A writer faster than this never pauses that long until it stops, so it costs one announce per
+    /// burst; a slower one, one per write. Zero turns it off. Checked on the agent's tick, so it fires up to one
+    /// tick later.
+    pub quiet_announce: Duration,
     /// History kept for anti-entropy.
     pub log_limits: LogLimits,
     /// Deltas kept while joining, to apply once the graph arrives (older ones are dropped past it; anti-entropy
@@ -54,13 +60,15 @@ pub struct AgentConfig {
 }
 
 impl AgentConfig {
-    /// Defaults for agent `id`: join wait 2 s (request every 200 ms), announce every 500 ms.
+    /// Defaults for agent `id`: join wait 2 s (request every 200 ms), announce every 500 ms and 100 ms after the
+    /// last of a burst of writes.
     pub fn new(id: AgentId) -> Self {
         AgentConfig {
             id,
             join_wait: Duration::from_secs(2),
             join_retry: Duration::from_millis(200),
             announce_period: Duration::from_millis(500),
+            quiet_announce: Duration::from_millis(100),
             log_limits: LogLimits::default(),
             max_buffered_deltas: 65_536,
             max_batch_bytes: 256 << 10,
@@ -244,6 +252,8 @@ struct State {
     buffered: VecDeque<Arc<Delta>>,
     collision: Option<String>,
     next_announce_ns: u64,
+    /// The time of the latest local write not yet followed by an announce ([`AgentConfig::quiet_announce`]).
+    unannounced_write_ns: Option<u64>,
     pending_ask: Option<(AgentId, u64)>,
     peers: BTreeMap<AgentId, u64>,
     seed: Option<CortexGraph>,
@@ -363,6 +373,7 @@ impl<T: Transport + 'static> Agent<T> {
             buffered: VecDeque::new(),
             collision: None,
             next_announce_ns: now,
+            unannounced_write_ns: None,
             pending_ask: None,
             peers: BTreeMap::new(),
             seed,
@@ -608,7 +619,11 @@ impl<T: Transport + 'static> Agent<T> {
             }
             let replica = state.replica.as_mut().ok_or(AgentError::NotJoined(agent))?;
             let (result, delta) = op(replica, now).map_err(|source| AgentError::Op { agent, source })?;
-            (result, delta, replica.drain_changes())
+            let changes = replica.drain_changes();
+            if !delta.is_empty() {
+                state.unannounced_write_ns = Some(now);
+            }
+            (result, delta, changes)
         };
         let messages = delta
             .iter()
@@ -865,23 +880,25 @@ impl<T: Transport> Inner<T> {
         }
     }
 
-    /// Whether a missing-delta request is still outstanding (answered requests clear it; one unanswered for two
-    /// announce periods no longer counts).
+    /// Whether a missing-delta request is still outstanding: answered requests clear it, and one unanswered for
+    /// half an announce period no longer counts (a lost request or answer is asked again at the next evidence: a gap
+    /// or an announce; an answer still on its way then comes twice, which the join does not mind).
     fn asked_recently(&self, state: &State, now: u64) -> bool {
         state
             .pending_ask
-            .is_some_and(|(_, at)| now.saturating_sub(at) < 2 * self.config.announce_period.as_nanos() as u64)
+            .is_some_and(|(_, at)| now.saturating_sub(at) < self.config.announce_period.as_nanos() as u64 / 2)
     }
 
-    /// The request for what `delta` shows missing, if anything: its writer's operation just before it has not been
-    /// joined. Every operation of an agent is published in order, so on a lossless channel this only happens when
-    /// samples overtake each other; an unneeded request is answered with nothing. At most one request is
-    /// outstanding, as for announces.
+    /// The request for what `delta` shows missing, if anything: some operation of its writer before it has not been
+    /// joined (the writer's contiguous prefix in [`Replica::applied`] ends before the delta's first dot). Every
+    /// operation of an agent is published in order, so on a lossless channel this only happens when samples
+    /// overtake each other; an unneeded request is answered with nothing. At most one request is outstanding, as
+    /// for announces; a hole older than the latest delta is still seen by the next one, once that request is
+    /// answered.
     fn gap_request(&self, state: &mut State, from: AgentId, delta: &Delta, now: u64) -> Option<(Channel, Message)> {
         let origin = delta.origin()?;
         let replica = state.replica.as_ref()?;
-        if origin.first <= 1
-            || replica.applied().contains(dsr::Dot::new(origin.replica, origin.first - 1))
+        if replica.applied().version(origin.replica).saturating_add(1) >= origin.first
             || self.asked_recently(state, now)
         {
             return None;
@@ -1205,8 +1222,11 @@ impl<T: Transport> Inner<T> {
         };
         {
             let mut state = self.lock();
+            let quiet = self.config.quiet_announce.as_nanos() as u64;
+            let quiet_after_writes =
+                quiet > 0 && state.unannounced_write_ns.is_some_and(|at| now.saturating_sub(at) >= quiet);
             if state.replica.is_some()
-                && now >= state.next_announce_ns
+                && (now >= state.next_announce_ns || quiet_after_writes)
                 && let Some(digest) = state.digest()
                 && let Some(replica) = &state.replica
             {
@@ -1221,6 +1241,7 @@ impl<T: Transport> Inner<T> {
                     },
                 ));
                 state.next_announce_ns = now + self.config.announce_period.as_nanos() as u64;
+                state.unannounced_write_ns = None;
             }
         }
         self.send(out);

@@ -370,3 +370,38 @@ fn a_delta_that_shows_a_gap_gets_the_missing_one_at_once_not_at_the_next_announc
     assert_eq!(sim.agents[1].status().gap_requests, 1);
     assert_eq!(sim.agents[0].status().gap_requests, 0);
 }
+
+#[test]
+fn a_lost_last_write_is_announced_once_the_writer_is_quiet_not_at_the_next_period() {
+    let mut sim = Sim::new(13, FaultConfig::default());
+    let mut agents = Vec::new();
+    for id in [1, 2] {
+        let transport = sim.plan.wrap(sim.bus.attach(1000), Arc::new(sim.clock.clone()) as Arc<dyn Clock>);
+        // Periodic announces far apart: only the announce after the writer falls quiet can repair in time.
+        let cfg = AgentConfig {
+            announce_period: Duration::from_secs(3600),
+            quiet_announce: Duration::from_millis(30),
+            ..config(id, 200 + u64::from(id))
+        };
+        agents.push(Agent::new(cfg, transport, Arc::new(sim.clock.clone())).unwrap());
+        sim.agents = agents;
+        sim.steps(400);
+        agents = std::mem::take(&mut sim.agents);
+    }
+    sim.agents = agents;
+    let id = sim.agents[0].insert_node(NewNode::new("object", "cup")).unwrap();
+    sim.steps(5);
+    assert!(sim.converged());
+
+    // Agent 1's last write is lost, and no later delta of it shows the gap.
+    sim.plan.set_config(FaultConfig { loss: 1.0, ..FaultConfig::default() });
+    sim.agents[0].set_attr(id, attrs::POS_X, 1.0f32).unwrap();
+    sim.steps(2);
+    sim.plan.set_config(FaultConfig::default());
+    sim.steps(20);
+    assert_eq!(sim.agents[1].attr(id, attrs::POS_X), None, "nothing repairs it before the writer is quiet");
+    // 30 ms (30 steps) after the write, agent 1 announces; agent 2 asks and gets the write.
+    let steps = sim.settle(40);
+    assert!(steps <= 15, "converged after {steps} more steps");
+    assert_eq!(sim.agents[1].attr(id, attrs::POS_X), Some(1.0));
+}

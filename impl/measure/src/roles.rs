@@ -3,8 +3,10 @@
 //! It runs `cortex replay --transport rtps --roles ... --json` (the `cortex` binary given to
 //! [`crate::experiment::run_set`]) and keeps what the replay reports: every role's BICA statistics (frequency
 //! achieved, misses, skipped releases, lateness and step time, fetched by a remote call over the same DDS engine
-//! just before the roles are quiesced), each agent's graph, and the time from the end of the replay until every
-//! agent had the bridge's digest (sampled from status lines every 100 ms, so that is its resolution).
+//! just before the roles are quiesced), each agent's graph, and the time from the quiesce — when every writer has
+//! stopped — until every agent had the bridge's digest (sampled from status lines every 100 ms, so that is its
+//! resolution). The statistics calls come between the end of the replay and the quiesce; with injected loss a lost
+//! call waits out its 1 s timeout, which is why the window is counted from the quiesce.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -89,9 +91,13 @@ pub struct RolesResult {
     /// Faults injected, as a specification.
     #[serde(default)]
     pub faults: Option<String>,
-    /// Milliseconds from the end of the replay until every agent had the bridge's digest (100 ms resolution).
+    /// Milliseconds from the quiesce (every writer stopped) until every agent had the bridge's digest (100 ms
+    /// resolution).
     #[serde(default)]
     pub converged_ms: Option<f64>,
+    /// Milliseconds from the end of the replay to the quiesce (the roles' statistics fetched meanwhile).
+    #[serde(default)]
+    pub quiesced_after_ms: Option<f64>,
     /// Whether every agent ended with the bridge's digest.
     pub digests_equal: bool,
     /// Every agent, the bridge first.
@@ -177,7 +183,11 @@ pub fn section(md: &mut String, experiment: Option<&RolesExperiment>, result: Op
             |f| format!("faults injected into what each agent process receives: `{f}`")
         ),
         match (r.digests_equal, r.converged_ms) {
-            (true, Some(ms)) => format!("every digest equal {ms:.0} ms after the replay ended (100 ms resolution)"),
+            (true, Some(ms)) => format!(
+                "every digest equal {ms:.0} ms after the writers stopped (100 ms resolution; the roles were told to \
+                 stop writing {:.0} ms after the replay ended, once their statistics were fetched)",
+                r.quiesced_after_ms.unwrap_or(0.0)
+            ),
             _ => "**the digests did not become equal** within the settle time".to_owned(),
         },
         r.messages,
@@ -251,7 +261,7 @@ mod tests {
             md.contains("| 2 | camera-detector | 5 | 12 | `BlobDetector` | 9.9 / 10.0 | 15 | 1 | 0 | 0.50 | 0.10 |"),
             "{md}"
         );
-        assert!(md.contains("every digest equal 120 ms after the replay ended"), "{md}");
+        assert!(md.contains("every digest equal 120 ms after the writers stopped"), "{md}");
         assert_eq!(
             short_type_name("bica::fsm::Fsm<perception::behaviour::SearchTrack, perception::behaviour::Data>"),
             "Fsm<SearchTrack, Data>"
