@@ -216,9 +216,9 @@ pub struct AgentStatus {
     /// Times a peer had joined the same operations but showed another graph digest (a replica bug; repaired with
     /// snapshots). Zero in a correct system.
     pub digest_mismatches: u64,
-    /// Missing-delta requests sent at once because a received delta showed a gap: its writer's previous operation
-    /// had not been joined (a lost sample, or one overtaken in flight). Anti-entropy would find the gap at the next
-    /// announce; this asks sooner.
+    /// Missing-delta requests sent at once because a received delta showed a gap: operations of its writer before
+    /// it had not been joined (a lost sample, or one overtaken in flight). Anti-entropy would find the gap at the
+    /// next announce; this asks sooner.
     pub gap_requests: u64,
     /// Call requests addressed to this agent (served, or answered with a fault).
     pub calls_served: u64,
