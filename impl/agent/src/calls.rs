@@ -1,8 +1,8 @@
 //! Remote calls between agents: request/reply on the `Calls` channel, beside the graph protocol.
 //!
 //! **Caller.** [`crate::Agent::call`] encodes a typed request with `postcard`, sends a
-//! [`Message::CallRequest`](crate::envelope::Message::CallRequest) with a fresh call id to one agent and waits up to
-//! a timeout for the [`Message::CallReply`](crate::envelope::Message::CallReply) with the same id. At most
+//! [`Message::CallRequest`] with a fresh call id to one agent and waits up to
+//! a timeout for the [`Message::CallReply`] with the same id. At most
 //! [`AgentConfig::max_calls_in_flight`](crate::AgentConfig::max_calls_in_flight) calls wait at once; a reply that
 //! comes after its caller gave up is dropped and counted.
 //!
