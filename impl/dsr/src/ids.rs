@@ -84,11 +84,6 @@ impl Name {
     pub fn as_str(&self) -> &str {
         &self.0
     }
-
-    /// Whether two names are equal, checked first by whether they share their text (cheap for shared copies).
-    pub(crate) fn same(&self, other: &Name) -> bool {
-        Arc::ptr_eq(&self.0, &other.0) || self.0 == other.0
-    }
 }
 
 impl std::borrow::Borrow<str> for Name {

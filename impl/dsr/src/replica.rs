@@ -17,7 +17,7 @@ use crate::error::{DeltaError, DictionaryError, OpError};
 use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
 use crate::mutants::{DsrMutant, Plant};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store, drop_covered_attrs, join_attrs};
-use crate::value::{AttrType, Value, ValueType};
+use crate::value::{AttrType, Value};
 
 /// Whether `name` is acceptable as a node name: 1 to 255 bytes, no control characters, no `#`.
 pub fn valid_node_name(name: &str) -> bool {
@@ -828,28 +828,21 @@ impl Replica {
     /// A snapshot repeats a few types and attribute names over many nodes: a type, or a known attribute name with its
     /// type, that has passed once is remembered (a few of them) and not looked up again, since the check is a pure
     /// function of the unchanged dictionary.
-    fn check_names<'d>(&self, delta: &'d Delta) -> Result<(), DeltaError> {
-        let mut passed_attrs: SmallVec<[(&Name, ValueType); 16]> = SmallVec::new();
-        let mut attrs = |attrs: &'d Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
+    fn check_names(&self, delta: &Delta) -> Result<(), DeltaError> {
+        let attrs = |attrs: &Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
             let mut first_types = BTreeMap::new();
             for (name, register) in attrs {
                 for entry in &register.values {
                     let ty = entry.value.value_type();
-                    if passed_attrs.iter().any(|(passed, passed_ty)| *passed_ty == ty && passed.same(name)) {
+                    // A known name of its own type, the common case: one lookup.
+                    if self.dictionary.attr_type(name) == Some(ty) {
                         continue;
                     }
                     let place = || format!("{} attribute {name:?}", owner());
                     self.dictionary
                         .peek_attr(name, ty)
                         .map_err(|source| DeltaError::Dictionary { place: place(), source })?;
-                    // Two values of different types for one unknown name within a delta is a conflict too (a known
-                    // name's type was just checked, so only unknown names need remembering).
-                    if self.dictionary.attr_type(name).is_some() {
-                        if passed_attrs.len() < passed_attrs.inline_size() {
-                            passed_attrs.push((name, ty));
-                        }
-                        continue;
-                    }
+                    // Two values of different types for one unknown name within a delta is a conflict too.
                     if let Some(first) = first_types.insert(name.clone(), ty).filter(|first| *first != ty) {
                         return Err(DeltaError::Dictionary {
                             place: place(),
@@ -864,32 +857,18 @@ impl Replica {
             }
             Ok(())
         };
-        let mut passed_types: SmallVec<[&Name; 8]> = SmallVec::new();
         for (id, node) in &delta.store.nodes {
             for core in &node.core.values {
-                let node_type = &core.value.node_type;
-                if passed_types.iter().any(|passed| passed.same(node_type)) {
-                    continue;
-                }
                 self.dictionary
-                    .peek_node_type(node_type)
+                    .peek_node_type(&core.value.node_type)
                     .map_err(|source| DeltaError::Dictionary { place: format!("node {id}"), source })?;
-                if passed_types.len() < passed_types.inline_size() {
-                    passed_types.push(node_type);
-                }
             }
             attrs(&node.attrs, &|| format!("node {id}"))?;
         }
-        passed_types.clear();
         for (key, edge) in &delta.store.edges {
-            if !passed_types.iter().any(|passed| passed.same(&key.edge_type)) {
-                self.dictionary
-                    .peek_edge_type(&key.edge_type)
-                    .map_err(|source| DeltaError::Dictionary { place: format!("edge {key}"), source })?;
-                if passed_types.len() < passed_types.inline_size() {
-                    passed_types.push(&key.edge_type);
-                }
-            }
+            self.dictionary
+                .peek_edge_type(&key.edge_type)
+                .map_err(|source| DeltaError::Dictionary { place: format!("edge {key}"), source })?;
             attrs(&edge.attrs, &|| format!("edge {key}"))?;
         }
         Ok(())

@@ -264,9 +264,9 @@ fn only_a_fresh_replica_and_a_snapshot_take_the_fast_path() {
     assert!(!used.can_install(&writer.snapshot()), "a replica that holds something joins the general way");
 }
 
-/// `check_names` remembers the names and types that passed; a known name with another type, an unknown type, or
-/// (with unknown names allowed) an unknown name with two types, later in a snapshot, is still refused, the same way
-/// as by the general join, and the replica is unchanged.
+/// After names that pass, a known name with another type, an unknown type, or (with unknown names allowed) an unknown
+/// name with two types, later in a snapshot, is still refused by `check_names`, the same way as by the general join,
+/// and the replica is unchanged.
 #[test]
 fn names_that_fail_after_names_that_passed_are_refused() {
     for case in 0..3 {
