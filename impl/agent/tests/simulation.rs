@@ -51,9 +51,15 @@ impl Sim {
     }
 
     fn spawn(&mut self, id: u32) -> usize {
+        self.spawn_with(id, |config| config)
+    }
+
+    /// Spawns agent `id` with the simulation's configuration changed by `adjust`.
+    fn spawn_with(&mut self, id: u32, adjust: impl FnOnce(AgentConfig) -> AgentConfig) -> usize {
         self.next_nonce += 1;
         let transport = self.plan.wrap(self.bus.attach(100_000), Arc::new(self.clock.clone()) as Arc<dyn Clock>);
-        let agent = Agent::new(config(id, self.next_nonce), transport, Arc::new(self.clock.clone())).unwrap();
+        let config = adjust(config(id, self.next_nonce));
+        let agent = Agent::new(config, transport, Arc::new(self.clock.clone())).unwrap();
         self.agents.push(agent);
         self.agents.len() - 1
     }
@@ -339,17 +345,11 @@ fn each_remote_update_gives_exactly_one_signal() {
 #[test]
 fn a_delta_that_shows_a_gap_gets_the_missing_one_at_once_not_at_the_next_announce() {
     let mut sim = Sim::new(11, FaultConfig::default());
-    let mut agents = Vec::new();
     for id in [1, 2] {
-        let transport = sim.plan.wrap(sim.bus.attach(1000), Arc::new(sim.clock.clone()) as Arc<dyn Clock>);
         // Announces far apart: only a gap request can repair within the test's few steps.
-        let cfg = AgentConfig { announce_period: Duration::from_secs(3600), ..config(id, 100 + u64::from(id)) };
-        agents.push(Agent::new(cfg, transport, Arc::new(sim.clock.clone())).unwrap());
-        sim.agents = agents;
+        sim.spawn_with(id, |config| AgentConfig { announce_period: Duration::from_secs(3600), ..config });
         sim.steps(400);
-        agents = std::mem::take(&mut sim.agents);
     }
-    sim.agents = agents;
     let id = sim.agents[0].insert_node(NewNode::new("object", "cup")).unwrap();
     sim.steps(5);
     assert!(sim.converged());
@@ -374,21 +374,15 @@ fn a_delta_that_shows_a_gap_gets_the_missing_one_at_once_not_at_the_next_announc
 #[test]
 fn a_lost_last_write_is_announced_once_the_writer_is_quiet_not_at_the_next_period() {
     let mut sim = Sim::new(13, FaultConfig::default());
-    let mut agents = Vec::new();
     for id in [1, 2] {
-        let transport = sim.plan.wrap(sim.bus.attach(1000), Arc::new(sim.clock.clone()) as Arc<dyn Clock>);
         // Periodic announces far apart: only the announce after the writer falls quiet can repair in time.
-        let cfg = AgentConfig {
+        sim.spawn_with(id, |config| AgentConfig {
             announce_period: Duration::from_secs(3600),
             quiet_announce: Duration::from_millis(30),
-            ..config(id, 200 + u64::from(id))
-        };
-        agents.push(Agent::new(cfg, transport, Arc::new(sim.clock.clone())).unwrap());
-        sim.agents = agents;
+            ..config
+        });
         sim.steps(400);
-        agents = std::mem::take(&mut sim.agents);
     }
-    sim.agents = agents;
     let id = sim.agents[0].insert_node(NewNode::new("object", "cup")).unwrap();
     sim.steps(5);
     assert!(sim.converged());
