@@ -84,7 +84,8 @@ use rustdds::no_key::{DataWriter, Decode, DefaultDecoder, DeserializerAdapter, S
 use rustdds::policy::{Durability, History, Reliability, ResourceLimits};
 use rustdds::{
     DomainParticipant, DomainParticipantBuilder, DomainParticipantStatusEvent, DomainParticipantStatusListener, GUID,
-    QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, StatusEvented, TopicKind, WriteOptionsBuilder,
+    QosPolicies, QosPolicyBuilder, RTPSEntity, RepresentationIdentifier, StatusEvented, Topic, TopicKind,
+    WriteOptionsBuilder,
 };
 
 use crate::{
@@ -492,11 +493,11 @@ impl RtpsTransport {
         let mut writers = Vec::new();
         let mut readers = Vec::new();
         let mut endpoints = Vec::new();
-        for channel in Channel::ALL {
-            let name = format!("{}_{}", config.topic_prefix, channel.name());
+        // The topic of `name` in the publishing participant, and in the subscribing one (the same if none).
+        let topics = |name: &str, qos: &QosPolicies| -> Result<(Topic, Topic), TransportError> {
             let topic = |participant: &DomainParticipant| {
                 participant
-                    .create_topic(name.clone(), "cortex::Envelope".into(), &qos, TopicKind::NoKey)
+                    .create_topic(name.to_owned(), "cortex::Envelope".into(), qos, TopicKind::NoKey)
                     .map_err(setup(format!("topic {name}")))
             };
             let written = topic(&publishing)?;
@@ -504,12 +505,23 @@ impl RtpsTransport {
                 Some(participant) => topic(participant)?,
                 None => written.clone(),
             };
-            let writer = publisher
-                .create_datawriter_no_key::<Payload, OctetsAdapter>(&written, Some(qos.clone()))
-                .map_err(setup(format!("writer of {name}")))?;
-            let reader = subscriber
-                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&read, Some(qos.clone()))
-                .map_err(setup(format!("reader of {name}")))?;
+            Ok((written, read))
+        };
+        let writer = |topic: &Topic, name: &str, qos: &QosPolicies| {
+            publisher
+                .create_datawriter_no_key::<Payload, OctetsAdapter>(topic, Some(qos.clone()))
+                .map_err(setup(format!("writer of {name}")))
+        };
+        let reader = |topic: &Topic, name: &str, qos: &QosPolicies| {
+            subscriber
+                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(topic, Some(qos.clone()))
+                .map_err(setup(format!("reader of {name}")))
+        };
+        for channel in Channel::ALL {
+            let name = format!("{}_{}", config.topic_prefix, channel.name());
+            let (written, read) = topics(&name, &qos)?;
+            let writer = writer(&written, &name, &qos)?;
+            let reader = reader(&read, &name, &qos)?;
             endpoints.push((channel, writer.guid(), reader.guid()));
             writers.push(Mutex::new(writer));
             readers.push((channel, reader));
@@ -519,21 +531,12 @@ impl RtpsTransport {
         let best_effort = {
             let name = format!("{}_updates_be", config.topic_prefix);
             let qos = qos_with(&config, Reliability::BestEffort);
-            let topic = |participant: &DomainParticipant| {
-                participant
-                    .create_topic(name.clone(), "cortex::Envelope".into(), &qos, TopicKind::NoKey)
-                    .map_err(setup(format!("topic {name}")))
-            };
-            let read = topic(subscribing.as_ref().unwrap_or(&publishing))?;
-            let reader = subscriber
-                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(&read, Some(qos.clone()))
-                .map_err(setup(format!("reader of {name}")))?;
+            let (written, read) = topics(&name, &qos)?;
+            let reader = reader(&read, &name, &qos)?;
             let writer = match config.updates {
                 UpdateDelivery::Reliable => None,
                 UpdateDelivery::BestEffort { max_bytes } => {
-                    let writer = publisher
-                        .create_datawriter_no_key::<Payload, OctetsAdapter>(&topic(&publishing)?, Some(qos.clone()))
-                        .map_err(setup(format!("writer of {name}")))?;
+                    let writer = writer(&written, &name, &qos)?;
                     endpoints.push((Channel::Updates, writer.guid(), reader.guid()));
                     Some((Mutex::new(writer), max_bytes))
                 }
