@@ -1,11 +1,14 @@
 //! The [`Agent`]: a `dsr::Replica` behind a thread-safe API, joined to other agents through a [`Transport`].
 //!
-//! All protocol decisions happen under one short lock on the agent's state and produce a list of messages; the
-//! messages are published after the lock is released. The same code runs threaded ([`Agent::start`]: a
-//! receiving thread waits on the transport) or driven by hand ([`Agent::pump`]: a simulation calls it with a
+//! The agent is the thin impure shell around the protocol's pure core ([`crate::core::AgentCore`]), as
+//! `bica::runtime` wraps `SchedulerCore`: it owns the threads, the transport, the clock and the one lock. Every
+//! protocol decision is the core's, made under that short lock from a received sample or a tick with the clock's
+//! `now_ns`; the messages it returns are published after the lock is released, its events logged and counted, a
+//! new life's incarnation recorded. The same code runs threaded ([`Agent::start`]: samples handled on the
+//! transport's receiving thread or the agent's own) or driven by hand ([`Agent::pump`]: a simulation calls it with a
 //! [`transport::ManualClock`] and a seeded fault injector, so runs are reproducible).
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::hash::{BuildHasher, Hasher};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -16,14 +19,16 @@ use bytes::Bytes;
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
 use dsr::json::CortexGraph;
 use dsr::{
-    AttrKey, AttrType, Change, Delta, Digest, EdgeKey, Element, LogLimits, Missing, NewNode, NodeId, OpError, Replica,
+    AttrKey, AttrType, Change, Delta, Digest, EdgeKey, Element, LogLimits, NewNode, NodeId, OpError, Replica,
     ReplicaId, Value, VisibleGraph,
 };
 use transport::{Channel, Clock, Sample, Transport, TransportError, TransportStats};
 
 use crate::AgentId;
 use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
+use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, ProtocolConfig, Send, WriteRefusal};
 use crate::envelope::Message;
+use crate::mutants::Plant;
 
 /// Settings of an agent.
 #[derive(Clone, Debug)]
@@ -53,10 +58,18 @@ pub struct AgentConfig {
     pub seed: Option<CortexGraph>,
     /// This life's nonce; `None` draws a random one (set it only in deterministic simulations).
     pub nonce: Option<u64>,
+    /// The file where each life records its incarnation before it writes (`cortex agent` keeps one per agent id
+    /// and graph in its state directory): the next life reads it and takes a higher one, so lives on one host
+    /// never share a replica id even when no peer is reachable. `None`: no record (see the crate's **Identity**).
+    pub life_file: Option<std::path::PathBuf>,
+    /// The previous life's incarnation, given directly instead of read from `life_file` (simulations).
+    pub recorded_incarnation: Option<u32>,
     /// Most remote calls of this agent waiting for replies at once.
     pub max_calls_in_flight: usize,
     /// Most call replies of this agent's server waiting to be published.
     pub call_reply_outbox: usize,
+    /// A planted protocol bug (always none without the `mutants` feature).
+    pub plant: Plant,
 }
 
 impl AgentConfig {
@@ -74,8 +87,28 @@ impl AgentConfig {
             max_batch_bytes: 256 << 10,
             seed: None,
             nonce: None,
+            life_file: None,
+            recorded_incarnation: None,
             max_calls_in_flight: 64,
             call_reply_outbox: 256,
+            plant: Plant::NONE,
+        }
+    }
+}
+
+impl AgentConfig {
+    /// The protocol core's settings.
+    pub fn protocol(&self) -> ProtocolConfig {
+        ProtocolConfig {
+            id: self.id,
+            join_wait_ns: self.join_wait.as_nanos() as u64,
+            join_retry_ns: self.join_retry.as_nanos() as u64,
+            announce_period_ns: self.announce_period.as_nanos() as u64,
+            quiet_announce_ns: self.quiet_announce.as_nanos() as u64,
+            log_limits: self.log_limits,
+            max_buffered_deltas: self.max_buffered_deltas,
+            max_batch_bytes: self.max_batch_bytes,
+            plant: self.plant,
         }
     }
 }
@@ -242,82 +275,24 @@ pub struct AgentStatus {
     pub last_answer: Option<AnswerTiming>,
 }
 
-/// Mutable protocol state, behind one lock.
-struct State {
-    replica: Option<Replica>,
-    joining_since_ns: u64,
-    last_request_ns: Option<u64>,
-    /// Highest incarnation of this agent id seen anywhere.
-    incarnation_floor: u32,
-    buffered: VecDeque<Arc<Delta>>,
-    collision: Option<String>,
-    next_announce_ns: u64,
-    /// The time of the latest local write not yet followed by an announce ([`AgentConfig::quiet_announce`]).
-    unannounced_write_ns: Option<u64>,
-    pending_ask: Option<(AgentId, u64)>,
-    peers: BTreeMap<AgentId, u64>,
-    seed: Option<CortexGraph>,
-    /// The digest of the visible graph at a context (cleared on every remote join; a local write moves the
-    /// context).
-    digest_cache: Option<(dsr::CausalContext, Digest)>,
-    /// The encoded snapshot at a context, cleared like `digest_cache`: several joiners (or repeated requests)
-    /// cost one encoding.
-    snapshot_cache: Option<(dsr::CausalContext, Bytes)>,
-    /// Graph requests answered recently, by (joiner, nonce), with the time: a joiner that repeats its request
-    /// while a large answer is still on its way gets no second copy within [`ANSWER_HOLD_NS`].
-    answered: BTreeMap<(AgentId, u64), u64>,
-    /// The transport's [`Transport::sync_matches`] when the last graph request went out.
+/// What the lock guards: the protocol core and what the shell measures about it.
+struct Locked {
+    core: AgentCore,
+    /// The transport's [`Transport::sync_matches`] when the core was last told of a match.
     sync_matches_seen: u64,
     /// How the late join went.
     timeline: JoinTimeline,
 }
 
-impl State {
-    /// The digest of the visible graph (cached per context).
-    fn digest(&mut self) -> Option<Digest> {
-        let replica = self.replica.as_ref()?;
-        if let Some((ctx, digest)) = &self.digest_cache
-            && ctx == replica.context()
-        {
-            return Some(*digest);
-        }
-        let digest = replica.digest();
-        self.digest_cache = Some((replica.context().clone(), digest));
-        Some(digest)
-    }
-
-    /// The encoded snapshot (cached per context).
-    fn snapshot_bytes(&mut self) -> Option<Bytes> {
-        self.snapshot_bytes_cached().map(|(bytes, _)| bytes)
-    }
-
-    /// The encoded snapshot (cached per context), and whether it came from the cache.
-    fn snapshot_bytes_cached(&mut self) -> Option<(Bytes, bool)> {
-        let replica = self.replica.as_ref()?;
-        if let Some((ctx, bytes)) = &self.snapshot_cache
-            && ctx == replica.context()
-        {
-            return Some((bytes.clone(), true));
-        }
-        let bytes = Bytes::from(replica.encode_snapshot());
-        self.snapshot_cache = Some((replica.context().clone(), bytes.clone()));
-        Some((bytes, false))
-    }
-}
-
 /// The receiving thread's longest wait while joining.
 const JOINING_TICK: Duration = Duration::from_millis(2);
-/// How long a graph request stays answered (a repeat within it gets no second copy).
-const ANSWER_HOLD_NS: u64 = 1_000_000_000;
-/// Most remembered answered requests.
-const MAX_ANSWERED: usize = 1024;
 
 struct Inner<T> {
     config: AgentConfig,
     nonce: u64,
     transport: T,
     clock: Arc<dyn Clock>,
-    state: Mutex<State>,
+    state: Mutex<Locked>,
     subscribers: Mutex<Vec<Sender<ChangeSignal>>>,
     stop: AtomicBool,
     /// Whether the replica exists (the receiving thread polls faster while joining).
@@ -365,21 +340,17 @@ impl<T: Transport + 'static> Agent<T> {
         let now = clock.now_ns();
         let nonce = config.nonce.unwrap_or_else(random_nonce);
         let seed = config.seed.take();
-        let state = State {
-            replica: None,
-            joining_since_ns: now,
-            last_request_ns: None,
-            incarnation_floor: 0,
-            buffered: VecDeque::new(),
-            collision: None,
-            next_announce_ns: now,
-            unannounced_write_ns: None,
-            pending_ask: None,
-            peers: BTreeMap::new(),
-            seed,
-            digest_cache: None,
-            snapshot_cache: None,
-            answered: BTreeMap::new(),
+        let recorded_incarnation = match (&config.life_file, config.recorded_incarnation) {
+            (_, Some(recorded)) => Some(recorded),
+            (Some(path), None) => crate::life::recorded(path).unwrap_or_else(|error| {
+                tracing::error!("{}: cannot read the incarnation record {}: {error}", config.id, path.display());
+                None
+            }),
+            (None, None) => None,
+        };
+        let core = AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation }, seed, now);
+        let state = Locked {
+            core,
             sync_matches_seen: 0,
             timeline: JoinTimeline { started_ns: now, ..JoinTimeline::default() },
         };
@@ -440,7 +411,7 @@ impl<T: Transport + 'static> Agent<T> {
             .spawn(move || {
                 while !inner.stop.load(Ordering::Relaxed) {
                     if let Ok(reply) = inner.service.outbox_rx.recv_timeout(tick) {
-                        inner.send(vec![(Channel::Calls, reply)]);
+                        inner.send(vec![Send { channel: Channel::Calls, message: reply, dest: Dest::All }], None);
                     }
                 }
             })
@@ -471,10 +442,15 @@ impl<T: Transport + 'static> Agent<T> {
     /// Publishes the call replies this agent's server has produced so far (the threaded agent does this on its
     /// own; an agent driven by hand does it in [`Agent::pump`]). Returns how many.
     pub fn flush_call_replies(&self) -> usize {
-        let replies: Vec<(Channel, Message)> =
-            self.inner.service.outbox_rx.try_iter().map(|reply| (Channel::Calls, reply)).collect();
+        let replies: Vec<Send> = self
+            .inner
+            .service
+            .outbox_rx
+            .try_iter()
+            .map(|message| Send { channel: Channel::Calls, message, dest: Dest::All })
+            .collect();
         let n = replies.len();
-        self.inner.send(replies);
+        self.inner.send(replies, None);
         n
     }
 
@@ -521,7 +497,7 @@ impl<T: Transport + 'static> Agent<T> {
 
     /// Whether the graph has been received or started.
     pub fn is_ready(&self) -> bool {
-        self.inner.lock().replica.is_some()
+        self.inner.lock().core.is_ready()
     }
 
     /// A new subscription to change signals, holding up to `capacity` undelivered signals.
@@ -533,12 +509,13 @@ impl<T: Transport + 'static> Agent<T> {
 
     /// Status and counters.
     pub fn status(&self) -> AgentStatus {
-        let state = self.inner.lock();
+        let locked = self.inner.lock();
+        let core = &locked.core;
         AgentStatus {
             id: self.inner.config.id,
-            replica: state.replica.as_ref().map(Replica::id),
-            ready: state.replica.is_some(),
-            collision: state.collision.clone(),
+            replica: core.replica().map(Replica::id),
+            ready: core.is_ready(),
+            collision: core.collision().map(str::to_owned),
             rejected: self.inner.rejected.load(Ordering::Relaxed),
             signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
@@ -548,11 +525,11 @@ impl<T: Transport + 'static> Agent<T> {
             call_replies_dropped: self.inner.service.dropped.load(Ordering::Relaxed),
             late_call_replies: self.inner.calls.late.load(Ordering::Relaxed),
             calls_in_flight: self.inner.calls.in_flight(),
-            peers: state.peers.keys().copied().collect(),
-            nodes: state.replica.as_ref().map_or(0, Replica::node_count),
-            edges: state.replica.as_ref().map_or(0, Replica::edge_count),
+            peers: core.peers().iter().copied().collect(),
+            nodes: core.replica().map_or(0, Replica::node_count),
+            edges: core.replica().map_or(0, Replica::edge_count),
             transport: self.inner.transport.stats(),
-            join: state.timeline,
+            join: locked.timeline,
             last_answer: *self.inner.last_answer.lock().unwrap_or_else(|p| p.into_inner()),
         }
     }
@@ -562,7 +539,7 @@ impl<T: Transport + 'static> Agent<T> {
 
     /// Runs `f` on the replica (`None` before the agent has its graph). Keep `f` short: it holds the lock.
     pub fn read<R>(&self, f: impl FnOnce(&Replica) -> R) -> Option<R> {
-        self.inner.lock().replica.as_ref().map(f)
+        self.inner.lock().core.replica().map(f)
     }
 
     /// A value copy of node `id`, if visible.
@@ -612,24 +589,14 @@ impl<T: Transport + 'static> Agent<T> {
     ) -> Result<R, AgentError> {
         let agent = self.inner.config.id;
         let now = self.inner.clock.now_ns();
-        let (result, delta, changes) = {
-            let mut state = self.inner.lock();
-            if let Some(detail) = &state.collision {
-                return Err(AgentError::IdCollision { agent, detail: detail.clone() });
-            }
-            let replica = state.replica.as_mut().ok_or(AgentError::NotJoined(agent))?;
-            let (result, delta) = op(replica, now).map_err(|source| AgentError::Op { agent, source })?;
-            let changes = replica.drain_changes();
-            if !delta.is_empty() {
-                state.unannounced_write_ns = Some(now);
-            }
-            (result, delta, changes)
-        };
-        let messages = delta
-            .iter()
-            .map(|delta| (Channel::Updates, Message::Delta { from: agent, delta: Bytes::from(delta.encode()) }))
-            .collect();
-        self.inner.send(messages);
+        let written = self.inner.lock().core.write(now, op);
+        let (result, out) = written.map_err(|refusal| match refusal {
+            WriteRefusal::NotJoined => AgentError::NotJoined(agent),
+            WriteRefusal::Collision(detail) => AgentError::IdCollision { agent, detail },
+            WriteRefusal::Op(source) => AgentError::Op { agent, source },
+        })?;
+        self.inner.send(out.sends, None);
+        let changes = out.changes;
         self.inner.signal(changes);
         Ok(result)
     }
@@ -807,7 +774,7 @@ fn node_copy(node: &dsr::NodeRef<'_>) -> NodeCopy {
 }
 
 impl<T: Transport> Inner<T> {
-    fn lock(&self) -> MutexGuard<'_, State> {
+    fn lock(&self) -> MutexGuard<'_, Locked> {
         self.state.lock().unwrap_or_else(|p| p.into_inner())
     }
 
@@ -815,23 +782,17 @@ impl<T: Transport> Inner<T> {
         self.config.id
     }
 
-    /// Publishes messages (never called with the state lock held).
-    fn send(&self, messages: Vec<(Channel, Message)>) {
-        for (channel, message) in messages {
-            if let Err(error) = self.transport.publish(channel, message.encode()) {
+    /// Publishes what the core asked for (never called with the state lock held): to everyone, or to the endpoint
+    /// `sender` alone where the transport can address one.
+    fn send(&self, sends: Vec<Send>, sender: Option<transport::EndpointId>) {
+        for Send { channel, message, dest } in sends {
+            let result = match (dest, sender) {
+                (Dest::Sender, Some(to)) => self.transport.publish_to(channel, message.encode(), to),
+                _ => self.transport.publish(channel, message.encode()),
+            };
+            if let Err(error) = result {
                 self.publish_failures.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!("{}: publishing a {} message failed: {error}", self.me(), message.kind());
-            }
-        }
-    }
-
-    /// Publishes messages for the endpoint `to` alone where the transport can address one (never called with the
-    /// state lock held).
-    fn send_to(&self, messages: Vec<(Channel, Message)>, to: transport::EndpointId) {
-        for (channel, message) in messages {
-            if let Err(error) = self.transport.publish_to(channel, message.encode(), to) {
-                self.publish_failures.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!("{}: publishing a {} message to {to} failed: {error}", self.me(), message.kind());
             }
         }
     }
@@ -840,7 +801,7 @@ impl<T: Transport> Inner<T> {
         if changes.is_empty() {
             return;
         }
-        let mine = self.lock().replica.as_ref().map(Replica::id);
+        let mine = self.lock().core.replica().map(Replica::id);
         let mut subscribers = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
         for event in changes {
             let signal = ChangeSignal {
@@ -859,392 +820,154 @@ impl<T: Transport> Inner<T> {
         }
     }
 
-    fn reject(&self, sample: &Sample, what: &str, error: &dyn std::fmt::Display) {
+    fn reject(&self, origin: &str, what: &str, error: &dyn std::fmt::Display) {
         self.rejected.fetch_add(1, Ordering::Relaxed);
-        tracing::error!(
-            "{}: dropped a {what} from {} on channel {}: {error}",
-            self.me(),
-            sample.origin,
-            sample.channel.name()
-        );
+        tracing::error!("{}: dropped a {what} from {origin}: {error}", self.me());
     }
 
-    /// Decodes a `dsr` delta from a message payload, or rejects the sample.
-    fn delta(&self, sample: &Sample, kind: &str, bytes: &[u8]) -> Option<Arc<Delta>> {
-        match Delta::decode(bytes) {
-            Ok(delta) => Some(Arc::new(delta)),
-            Err(error) => {
-                self.reject(sample, kind, &error);
-                None
-            }
-        }
-    }
-
-    /// Whether a missing-delta request is still outstanding: answered requests clear it, and one unanswered for
-    /// half an announce period no longer counts (a lost request or answer is asked again at the next evidence: a gap
-    /// or an announce; an answer still on its way then comes twice, which the join does not mind).
-    fn asked_recently(&self, state: &State, now: u64) -> bool {
-        state
-            .pending_ask
-            .is_some_and(|(_, at)| now.saturating_sub(at) < self.config.announce_period.as_nanos() as u64 / 2)
-    }
-
-    /// The request for what `delta` shows missing, if anything: some operation of its writer before it has not been
-    /// joined (the writer's contiguous prefix in [`Replica::applied`] ends before the delta's first dot). Every
-    /// operation of an agent is published in order, so on a lossless channel this only happens when samples
-    /// overtake each other; an unneeded request is answered with nothing. At most one request is outstanding, as
-    /// for announces; a hole older than the latest delta is still seen by the next one, once that request is
-    /// answered.
-    fn gap_request(&self, state: &mut State, from: AgentId, delta: &Delta, now: u64) -> Option<(Channel, Message)> {
-        let origin = delta.origin()?;
-        let replica = state.replica.as_ref()?;
-        if replica.applied().version(origin.replica).saturating_add(1) >= origin.first
-            || self.asked_recently(state, now)
-        {
-            return None;
-        }
-        self.gap_requests.fetch_add(1, Ordering::Relaxed);
-        let request =
-            Message::MissingRequest { from: self.me(), to: from, applied: replica.applied().clone(), full: false };
-        state.pending_ask = Some((from, now));
-        Some((Channel::Sync, request))
-    }
-
-    /// Joins remote deltas into the replica; returns the changes they made.
-    fn apply(&self, state: &mut State, sample: &Sample, kind: &str, deltas: Vec<Arc<Delta>>) -> Vec<dsr::ChangeEvent> {
-        // A join can change the store without moving the context (the snapshot repair): drop the caches.
-        state.digest_cache = None;
-        state.snapshot_cache = None;
-        let Some(replica) = state.replica.as_mut() else {
-            for delta in deltas {
-                if state.buffered.len() >= self.config.max_buffered_deltas {
-                    state.buffered.pop_front();
+    /// Tells a person, counts and records what the core reported (under the state lock: a new life's incarnation
+    /// is recorded before the life can write).
+    fn report(&self, locked: &mut Locked, events: &[Event], origin: &str) {
+        let me = self.me();
+        for event in events {
+            match event {
+                Event::Rejected { what, error } => self.reject(origin, what, error),
+                Event::GraphRequested => {
+                    let now = locked.core.last_request_ns().unwrap_or_default();
+                    let timeline = &mut locked.timeline;
+                    timeline.first_request_ns.get_or_insert(now);
+                    timeline.last_request_ns = Some(now);
+                    timeline.requests += 1;
                 }
-                state.buffered.push_back(delta);
+                Event::Ready { replica, incarnation, alone, seed_nodes } => {
+                    if let Some(path) = &self.config.life_file
+                        && let Err(error) = crate::life::record(path, *incarnation)
+                    {
+                        tracing::error!(
+                            "{me}: cannot record incarnation {incarnation} in {}: {error}; a later life started \
+                             alone may reuse replica {replica}",
+                            path.display()
+                        );
+                    }
+                    if *alone {
+                        tracing::info!("{me}: no peer answered within {:?}; started alone", self.config.join_wait);
+                    }
+                    if let Some(nodes) = seed_nodes {
+                        tracing::info!("{me}: started from the seed graph ({nodes} nodes)");
+                    }
+                    tracing::info!("{me}: ready as replica {replica} (incarnation {incarnation})");
+                    locked.timeline.alone = *alone;
+                    self.joined.store(true, Ordering::Relaxed);
+                }
+                Event::SeedRefused { error } => {
+                    tracing::error!("{me}: the seed graph was refused, starting empty: {error}")
+                }
+                Event::SeedUnused => tracing::warn!("{me}: joined a running graph; the seed graph is not used"),
+                Event::Answered { .. } => {}
+                Event::Collision { detail } => {
+                    tracing::error!("{me}: id collision: {detail}; local writes are refused")
+                }
+                Event::DigestMismatch { peer } => {
+                    self.digest_mismatches.fetch_add(1, Ordering::Relaxed);
+                    tracing::error!(
+                        "{me}: same operations joined as {peer} but a different graph digest; exchanging snapshots"
+                    );
+                }
+                Event::GapRequest { .. } => {
+                    self.gap_requests.fetch_add(1, Ordering::Relaxed);
+                }
+                Event::IncarnationsExhausted => {
+                    tracing::error!("{me}: no incarnation is left for a new life; local writes are refused")
+                }
             }
-            return Vec::new();
-        };
-        for delta in deltas {
-            if let Err(error) = replica.apply_shared(delta) {
-                self.reject(sample, kind, &error);
-            }
-        }
-        replica.drain_changes()
-    }
-
-    fn note_incarnations(&self, state: &mut State, context: &dsr::CausalContext) {
-        for replica in context.replicas() {
-            if AgentId::of_replica(replica) == self.me() {
-                state.incarnation_floor = state.incarnation_floor.max(AgentId::incarnation_of(replica));
-            }
-        }
-    }
-
-    /// Whether a message with this agent's id from life `nonce` (replica `replica`, if known) is a collision.
-    fn check_collision(&self, state: &mut State, nonce: u64, replica: Option<ReplicaId>, kind: &str) {
-        if nonce == self.nonce || state.collision.is_some() {
-            return;
-        }
-        let mine = state.replica.as_ref().map(|r| AgentId::incarnation_of(r.id()));
-        let older = match (replica, mine) {
-            (Some(theirs), Some(mine)) => AgentId::incarnation_of(theirs) < mine,
-            _ => false,
-        };
-        if !older {
-            let detail =
-                format!("a {kind} from another life of {} (nonce {nonce:#x}, mine {:#x})", self.me(), self.nonce);
-            tracing::error!("{}: id collision: {detail}", self.me());
-            state.collision = Some(detail);
         }
     }
 
     fn handle(&self, sample: Sample) {
         let received_ns = self.clock.now_ns();
+        let origin = || format!("{} on channel {}", sample.origin, sample.channel.name());
         let message = match Message::decode(&sample.bytes) {
             Ok(message) => message,
-            Err(error) => return self.reject(&sample, "sample", &error),
+            Err(error) => return self.reject(&origin(), "sample", &error),
         };
         if message.to().is_some_and(|to| to != self.me()) {
             return;
         }
         let me = self.me();
-        let now = received_ns;
         // Calls never touch the replica: route them without holding the state lock across the server.
         let message = match message {
             Message::CallRequest { from, call, method, args, .. } => {
-                self.lock().peers.insert(from, now);
+                self.lock().core.heard_from(from);
                 return self.service.request(me, from, call, &method, args);
             }
             Message::CallReply { from, call, result, .. } => {
-                self.lock().peers.insert(from, now);
+                self.lock().core.heard_from(from);
                 return self.calls.deliver(from, call, result);
             }
             other => other,
         };
-        let mut out = Vec::new();
-        // Answers to the sample's sender (graph answers, missing deltas, snapshots): published to its endpoint alone
-        // where the transport can address one.
-        let mut replies = Vec::new();
-        let mut answer: Option<AnswerTiming> = None;
-        let changes = {
-            let mut state = self.lock();
-            state.peers.insert(message.from(), now);
-            match message {
-                Message::Delta { from, delta } => match self.delta(&sample, "delta", &delta) {
-                    Some(delta) => {
-                        out.extend(self.gap_request(&mut state, from, &delta, now));
-                        self.apply(&mut state, &sample, "delta", vec![delta])
-                    }
-                    None => Vec::new(),
-                },
-                Message::Announce { from, nonce, replica, applied, digest } => {
-                    self.note_incarnations(&mut state, &applied);
-                    if from == me {
-                        self.check_collision(&mut state, nonce, Some(replica), "announce");
-                    }
-                    let ask = match &state.replica {
-                        Some(replica) if !self.asked_recently(&state, now) => {
-                            if !replica.applied().includes(&applied) {
-                                Some(false)
-                            } else if *replica.applied() == applied && state.digest().map(|d| d.0) != Some(digest) {
-                                // The same operations joined, yet another graph: a bug in the replica. Say so
-                                // loudly, and repair with whole states.
-                                self.digest_mismatches.fetch_add(1, Ordering::Relaxed);
-                                tracing::error!(
-                                    peer = from.0,
-                                    "same operations joined as the peer but a different graph digest; exchanging snapshots"
-                                );
-                                Some(true)
-                            } else {
-                                None
-                            }
-                        }
-                        _ => None,
-                    };
-                    if let (Some(full), Some(replica)) = (ask, &state.replica) {
-                        out.push((
-                            Channel::Sync,
-                            Message::MissingRequest { from: me, to: from, applied: replica.applied().clone(), full },
-                        ));
-                        state.pending_ask = Some((from, now));
-                    }
-                    Vec::new()
-                }
-                Message::MissingRequest { from, applied, full, .. } => {
-                    let missing = match &state.replica {
-                        Some(replica) if !full => replica.missing_for(&applied),
-                        _ => Missing::UpToDate,
-                    };
-                    let snapshot = match missing {
-                        Missing::UpToDate => full.then(|| state.snapshot_bytes()).flatten(),
-                        Missing::Deltas(deltas) => {
-                            replies.extend(self.batches(from, &deltas));
-                            None
-                        }
-                        Missing::Snapshot => state.snapshot_bytes(),
-                    };
-                    if let Some(snapshot) = snapshot {
-                        replies.push((Channel::Sync, Message::Snapshot { from: me, to: from, snapshot }));
-                    }
-                    Vec::new()
-                }
-                Message::Deltas { from, deltas, .. } => {
-                    if state.pending_ask.is_some_and(|(peer, _)| peer == from) {
-                        state.pending_ask = None;
-                    }
-                    let decoded: Vec<Arc<Delta>> =
-                        deltas.iter().filter_map(|d| self.delta(&sample, "missing delta", d)).collect();
-                    self.apply(&mut state, &sample, "missing delta", decoded)
-                }
-                Message::Snapshot { from, snapshot, .. } => {
-                    if state.pending_ask.is_some_and(|(peer, _)| peer == from) {
-                        state.pending_ask = None;
-                    }
-                    match self.delta(&sample, "snapshot", &snapshot) {
-                        Some(snapshot) => {
-                            self.note_incarnations(&mut state, snapshot.context());
-                            self.apply(&mut state, &sample, "snapshot", vec![snapshot])
-                        }
-                        None => Vec::new(),
-                    }
-                }
-                Message::GraphRequest { from, nonce } => {
-                    if from == me {
-                        self.check_collision(&mut state, nonce, None, "graph request");
-                    } else {
-                        let recent = state
-                            .answered
-                            .get(&(from, nonce))
-                            .is_some_and(|at| now.saturating_sub(*at) < ANSWER_HOLD_NS);
-                        if !recent && let Some((snapshot, from_cache)) = state.snapshot_bytes_cached() {
-                            state.answered.retain(|_, at| now.saturating_sub(*at) < ANSWER_HOLD_NS);
-                            if state.answered.len() < MAX_ANSWERED {
-                                state.answered.insert((from, nonce), now);
-                            }
-                            answer = Some(AnswerTiming {
-                                to: from,
-                                request_received_ns: received_ns,
-                                snapshot_ready_ns: self.clock.now_ns(),
-                                from_cache,
-                                published_ns: 0,
-                                snapshot_bytes: snapshot.len(),
-                            });
-                            replies.push((Channel::Sync, Message::GraphAnswer { from: me, to: from, nonce, snapshot }));
-                        }
-                    }
-                    Vec::new()
-                }
-                Message::GraphAnswer { nonce, snapshot, .. } => {
-                    if nonce != self.nonce || state.replica.is_some() {
-                        Vec::new()
-                    } else {
-                        state.timeline.answer_received_ns = Some(received_ns);
-                        state.timeline.answer_bytes = snapshot.len();
-                        match self.delta(&sample, "graph answer", &snapshot) {
-                            Some(snapshot) => {
-                                state.timeline.decoded_ns = Some(self.clock.now_ns());
-                                self.join(&mut state, &sample, Some(snapshot))
-                            }
-                            None => Vec::new(),
-                        }
-                    }
-                }
-                // Routed above.
-                Message::CallRequest { .. } | Message::CallReply { .. } => Vec::new(),
-            }
+        let answer_bytes = match &message {
+            Message::GraphAnswer { snapshot, .. } => Some(snapshot.len()),
+            _ => None,
         };
-        self.send(out);
-        self.send_to(replies, sample.origin);
-        if let Some(mut answer) = answer {
+        let decoded = Input::decode(message);
+        for (what, error) in &decoded.rejected {
+            self.reject(&origin(), what, error);
+        }
+        let Some(input) = decoded.input else { return };
+        let decoded_ns = self.clock.now_ns();
+        let (out, answered) = {
+            let mut locked = self.lock();
+            let out = locked.core.handle(decoded_ns, input);
+            self.report(&mut locked, &out.events, &origin());
+            if let (Some(bytes), true) = (answer_bytes, out.events.iter().any(|e| matches!(e, Event::Ready { .. }))) {
+                let timeline = &mut locked.timeline;
+                timeline.answer_received_ns = Some(received_ns);
+                timeline.answer_bytes = bytes;
+                timeline.decoded_ns = Some(decoded_ns);
+                timeline.ready_ns = Some(self.clock.now_ns());
+            }
+            let answered = out.events.iter().find_map(|event| match event {
+                Event::Answered { to, snapshot_bytes, from_cache } => Some(AnswerTiming {
+                    to: *to,
+                    request_received_ns: received_ns,
+                    snapshot_ready_ns: self.clock.now_ns(),
+                    from_cache: *from_cache,
+                    published_ns: 0,
+                    snapshot_bytes: *snapshot_bytes,
+                }),
+                _ => None,
+            });
+            (out, answered)
+        };
+        self.send(out.sends, Some(sample.origin));
+        if let Some(mut answer) = answered {
             answer.published_ns = self.clock.now_ns();
             *self.last_answer.lock().unwrap_or_else(|p| p.into_inner()) = Some(answer);
         }
-        self.signal(changes);
-    }
-
-    /// Splits retained deltas into answer messages of bounded size.
-    fn batches(&self, to: AgentId, deltas: &[Arc<Delta>]) -> Vec<(Channel, Message)> {
-        let mut out = Vec::new();
-        let mut batch = Vec::new();
-        let mut bytes = 0;
-        for delta in deltas {
-            let encoded = Bytes::from(delta.encode());
-            if !batch.is_empty()
-                && (bytes + encoded.len() > self.config.max_batch_bytes || batch.len() >= crate::envelope::MAX_BATCH)
-            {
-                out.push((Channel::Sync, Message::Deltas { from: self.me(), to, deltas: std::mem::take(&mut batch) }));
-                bytes = 0;
-            }
-            bytes += encoded.len();
-            batch.push(encoded);
-        }
-        if !batch.is_empty() {
-            out.push((Channel::Sync, Message::Deltas { from: self.me(), to, deltas: batch }));
-        }
-        out
-    }
-
-    /// Creates this life's replica from a received snapshot (or alone, from the seed), then applies what was
-    /// buffered while joining.
-    fn join(&self, state: &mut State, sample: &Sample, snapshot: Option<Arc<Delta>>) -> Vec<dsr::ChangeEvent> {
-        if let Some(snapshot) = &snapshot {
-            self.note_incarnations(state, snapshot.context());
-        }
-        let snapshot_given = snapshot.as_ref().map(|_| ());
-        let incarnation = state.incarnation_floor + 1;
-        let mut replica = Replica::new(self.me().replica(incarnation));
-        replica.set_log_limits(self.config.log_limits);
-        replica.set_change_tracking(true);
-        if let Some(snapshot) = snapshot {
-            if let Err(error) = replica.apply_shared(snapshot) {
-                self.reject(sample, "graph answer", &error);
-                return Vec::new();
-            }
-            if state.seed.take().is_some() {
-                tracing::warn!("{}: joined a running graph; the seed graph is not used", self.me());
-            }
-        } else if let Some(seed) = state.seed.take() {
-            let now = self.clock.now_ns();
-            match seed.import_into(&mut replica, now) {
-                Ok(report) => tracing::info!("{}: started from the seed graph ({} nodes)", self.me(), report.nodes),
-                Err(error) => tracing::error!("{}: the seed graph was refused, starting empty: {error}", self.me()),
-            }
-        }
-        for delta in std::mem::take(&mut state.buffered) {
-            if let Err(error) = replica.apply_shared(delta) {
-                self.rejected.fetch_add(1, Ordering::Relaxed);
-                tracing::error!("{}: a buffered delta was refused: {error}", self.me());
-            }
-        }
-        tracing::info!("{}: ready as replica {}", self.me(), replica.id());
-        let changes = replica.drain_changes();
-        state.replica = Some(replica);
-        state.timeline.ready_ns = Some(self.clock.now_ns());
-        state.timeline.alone = snapshot_given.is_none();
-        self.joined.store(true, Ordering::Relaxed);
-        changes
+        self.signal(out.changes);
     }
 
     /// Periodic work: graph requests while joining, starting alone after the wait, announces.
     fn tick(&self) {
         let now = self.clock.now_ns();
-        let me = self.me();
-        let mut out = Vec::new();
-        let changes = {
-            let mut state = self.lock();
-            if state.replica.is_none() {
-                if now.saturating_sub(state.joining_since_ns) >= self.config.join_wait.as_nanos() as u64 {
-                    tracing::info!("{me}: no peer answered within {:?}; starting alone", self.config.join_wait);
-                    let local =
-                        Sample { channel: Channel::Sync, origin: self.transport.local_id(), bytes: Bytes::new() };
-                    self.join(&mut state, &local, None)
-                } else {
-                    // A request published before discovery matched a peer reaches nobody: ask again at once when a
-                    // new match appears, besides the periodic retry.
-                    let matches = self.transport.sync_matches();
-                    let due = state
-                        .last_request_ns
-                        .is_none_or(|at| now.saturating_sub(at) >= self.config.join_retry.as_nanos() as u64)
-                        || matches != state.sync_matches_seen;
-                    if due {
-                        state.last_request_ns = Some(now);
-                        state.sync_matches_seen = matches;
-                        state.timeline.first_request_ns.get_or_insert(now);
-                        state.timeline.last_request_ns = Some(now);
-                        state.timeline.requests += 1;
-                        out.push((Channel::Sync, Message::GraphRequest { from: me, nonce: self.nonce }));
-                    }
-                    Vec::new()
-                }
-            } else {
-                Vec::new()
+        let out = {
+            let mut locked = self.lock();
+            // A request published before discovery matched a peer reaches nobody: ask again at once when a new
+            // match appears, besides the periodic retry.
+            let matches = self.transport.sync_matches();
+            if matches != locked.sync_matches_seen {
+                locked.sync_matches_seen = matches;
+                locked.core.discovery_matched();
             }
+            let out = locked.core.tick(now);
+            self.report(&mut locked, &out.events, "this agent");
+            if out.events.iter().any(|e| matches!(e, Event::Ready { .. })) {
+                locked.timeline.ready_ns = Some(now);
+            }
+            out
         };
-        {
-            let mut state = self.lock();
-            let quiet = self.config.quiet_announce.as_nanos() as u64;
-            let quiet_after_writes =
-                quiet > 0 && state.unannounced_write_ns.is_some_and(|at| now.saturating_sub(at) >= quiet);
-            if state.replica.is_some()
-                && (now >= state.next_announce_ns || quiet_after_writes)
-                && let Some(digest) = state.digest()
-                && let Some(replica) = &state.replica
-            {
-                out.push((
-                    Channel::Sync,
-                    Message::Announce {
-                        from: me,
-                        nonce: self.nonce,
-                        replica: replica.id(),
-                        applied: replica.applied().clone(),
-                        digest: digest.0,
-                    },
-                ));
-                state.next_announce_ns = now + self.config.announce_period.as_nanos() as u64;
-                state.unannounced_write_ns = None;
-            }
-        }
-        self.send(out);
-        self.signal(changes);
+        self.send(out.sends, None);
+        self.signal(out.changes);
     }
 }

@@ -40,7 +40,10 @@ use std::fmt;
 
 pub mod agent;
 pub mod calls;
+pub mod core;
 pub mod envelope;
+pub mod life;
+pub mod mutants;
 
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline};
 pub use calls::{CallError, CallFault, CallReplier, CallServer, PendingCall};
