@@ -98,6 +98,27 @@ pub struct AgentArgs {
     /// one graph may mix settings: each reads both.
     #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
     pub updates: UpdatesArg,
+    /// Where this agent records each life's incarnation (`DIR/d<DOMAIN>-<PREFIX>-a<ID>.life`), so that a restarted
+    /// agent never takes an earlier life's replica id, even when no peer is reachable. Default
+    /// `$XDG_STATE_HOME/cortex`, else `~/.local/state/cortex`; `none` keeps no record (a life then draws its
+    /// incarnation floor at random: see the `agent` crate's Identity section).
+    #[arg(long)]
+    pub state_dir: Option<String>,
+}
+
+/// The incarnation record of agent `id` of the graph (`domain`, `prefix`) under `state_dir` (see
+/// [`AgentArgs::state_dir`]); `None` for `none`, or when no home directory is known.
+pub fn life_file(state_dir: Option<&str>, domain: u16, prefix: &str, id: u32) -> Option<PathBuf> {
+    let dir = match state_dir {
+        Some("none") => return None,
+        Some(dir) => PathBuf::from(dir),
+        None => match (std::env::var_os("XDG_STATE_HOME"), std::env::var_os("HOME")) {
+            (Some(state), _) if !state.is_empty() => PathBuf::from(state).join("cortex"),
+            (_, Some(home)) if !home.is_empty() => PathBuf::from(home).join(".local/state/cortex"),
+            _ => return None,
+        },
+    };
+    Some(dir.join(format!("d{domain}-{prefix}-a{id}.life")))
 }
 
 /// `--updates`: how the transport sends [`Channel::Updates`] ([`UpdateDelivery`]).
@@ -145,7 +166,8 @@ pub type AgentTransport = Arc<dyn transport::Transport>;
 
 /// Starts an agent on RTPS with the real clock: the way `cortex agent` and `cortex inspect` join a graph. With
 /// `faults`, what the agent receives goes through the seeded fault injector (seeded with the agent id), so loss,
-/// duplication, reordering and delay hit a real agent with its anti-entropy.
+/// duplication, reordering and delay hit a real agent with its anti-entropy. `life_file` is where each life records
+/// its incarnation ([`AgentConfig::life_file`]).
 ///
 /// # Errors
 /// An unreadable or invalid seed graph, or a DDS domain that cannot be joined.
@@ -155,12 +177,14 @@ pub fn start_rtps_agent(
     seed_json: Option<&std::path::Path>,
     rtps: RtpsConfig,
     faults: Option<FaultConfig>,
+    life_file: Option<PathBuf>,
 ) -> Result<Arc<Agent<AgentTransport>>> {
     if id >= AgentId::LIMIT {
         bail!("--id {id} is out of range (0..{})", AgentId::LIMIT);
     }
     let mut config = AgentConfig::new(AgentId(id));
     config.join_wait = Duration::from_millis(join_wait_ms);
+    config.life_file = life_file;
     if let Some(path) = seed_json {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
@@ -189,6 +213,7 @@ pub fn run(args: AgentArgs) -> Result<()> {
             ..RtpsConfig::default()
         },
         args.faults,
+        life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id),
     )?;
     let stop = Arc::new(AtomicBool::new(false));
     let mut player = None;

@@ -1,6 +1,7 @@
 //! `cortex check`: the Stateright model checks of the real implementation (see the `model` crate).
 //!
-//! `convergence` checks the DSR replica, `scheduler` the BICA scheduler core, `mutants` plants each known bug and
+//! `convergence` checks the DSR replica, `agents` the agent protocol's core between agents with faults,
+//! `scheduler` the BICA scheduler core, `mutants` plants each known bug and
 //! checks that a model kills it (only in a build with the `mutants` feature, so a normal build cannot plant bugs).
 //! Text output by default, the full report with `--json`; a progress line on standard error while checking. Exit
 //! code 1 when a property fails, or (for `mutants`) when a mutant survives.
@@ -27,6 +28,8 @@ pub struct CheckArgs {
 enum CheckCommand {
     /// CRDT convergence of the real DSR replica under any delivery order, duplication or loss.
     Convergence(ConvergenceArgs),
+    /// The real agent protocol core between N agents: loss, duplication, reordering, crashes and restarts, cuts.
+    Agents(AgentsArgs),
     /// Graceful degradation of the real BICA scheduler core on a virtual clock.
     Scheduler(SchedulerArgs),
     /// Plant every known bug and check that the models kill it (needs a build with `--features mutants`).
@@ -84,6 +87,33 @@ fn parse_network(text: &str) -> Result<NetworkKind, String> {
 }
 
 #[derive(Debug, Args)]
+struct AgentsArgs {
+    /// Number of agents.
+    #[arg(long, default_value_t = 3)]
+    agents: usize,
+    /// Local writes, shared by all agents.
+    #[arg(long, default_value_t = 2)]
+    writes: usize,
+    /// Messages the network may lose.
+    #[arg(long, default_value_t = 1)]
+    losses: usize,
+    /// Messages the network may deliver twice.
+    #[arg(long, default_value_t = 1)]
+    duplicates: usize,
+    /// Crashes (each may be followed by a restart as a new life).
+    #[arg(long, default_value_t = 1)]
+    crashes: usize,
+    /// Network cuts (each may heal).
+    #[arg(long, default_value_t = 1)]
+    cuts: usize,
+    /// Timer ticks, shared by all agents.
+    #[arg(long, default_value_t = 6)]
+    ticks: usize,
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+#[derive(Debug, Args)]
 struct SchedulerArgs {
     /// Top-level components: the first three are two parents sharing a dependency and an independent logger;
     /// more are independent workers.
@@ -126,6 +156,25 @@ pub fn run(args: CheckArgs) -> Result<()> {
                 return explore(model::convergence::model(&config), address);
             }
             finish(model::check_convergence(&config, &args.common.options()), args.common.json)
+        }
+        CheckCommand::Agents(args) => {
+            if args.agents < 2 || args.agents > 4 {
+                bail!("--agents must be between 2 and 4 (got {})", args.agents);
+            }
+            let config = model::AgentsConfig {
+                agents: args.agents,
+                writes: args.writes,
+                losses: args.losses,
+                duplicates: args.duplicates,
+                crashes: args.crashes,
+                cuts: args.cuts,
+                ticks: args.ticks,
+                ..Default::default()
+            };
+            if let Some(address) = args.common.explore {
+                return explore(model::agents::AgentsModel::new(config), address);
+            }
+            finish(model::check_agents(&config, &args.common.options()), args.common.json)
         }
         CheckCommand::Scheduler(args) => {
             let config = scheduler_config(&args)?;

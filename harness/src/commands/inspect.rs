@@ -72,6 +72,7 @@ pub fn run(args: InspectArgs) -> Result<()> {
         args.seed_json.as_deref(),
         RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() },
         None,
+        super::agent::life_file(None, args.domain, &args.topic_prefix, args.id),
     )?;
     let feed: Arc<dyn GraphFeed> = agent.clone();
     let mut demo = None;

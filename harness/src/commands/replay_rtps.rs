@@ -225,7 +225,8 @@ pub fn replay(
     }
     let prefix = format!("replay{}", std::process::id());
     let rtps = RtpsConfig { domain_id: config.domain, topic_prefix: prefix.clone(), ..RtpsConfig::default() };
-    let bridge = start_rtps_agent(1, 300, None, rtps, None)?;
+    // A graph of this run alone (its own topic prefix): no earlier life to keep apart from, no record.
+    let bridge = start_rtps_agent(1, 300, None, rtps, None, None)?;
     if !bridge.wait_ready(Duration::from_secs(10)) {
         bail!("the bridge agent did not start its graph");
     }

@@ -54,6 +54,10 @@ pub struct AgentConfig {
     pub max_buffered_deltas: usize,
     /// Most bytes of deltas in one anti-entropy answer message.
     pub max_batch_bytes: usize,
+    /// How long a graph request stays answered: a joiner's repeat within it gets no second copy, one after it does
+    /// (the first answer may have been lost). Keep [`AgentConfig::join_wait`] above this plus a join retry, or a
+    /// joiner whose answer was lost starts alone.
+    pub answer_hold: Duration,
     /// The graph to start from if no peer answers (the first agent of a system).
     pub seed: Option<CortexGraph>,
     /// This life's nonce; `None` draws a random one (set it only in deterministic simulations).
@@ -85,6 +89,7 @@ impl AgentConfig {
             log_limits: LogLimits::default(),
             max_buffered_deltas: 65_536,
             max_batch_bytes: 256 << 10,
+            answer_hold: Duration::from_millis(500),
             seed: None,
             nonce: None,
             life_file: None,
@@ -108,6 +113,7 @@ impl AgentConfig {
             log_limits: self.log_limits,
             max_buffered_deltas: self.max_buffered_deltas,
             max_batch_bytes: self.max_batch_bytes,
+            answer_hold_ns: self.answer_hold.as_nanos() as u64,
             plant: self.plant,
         }
     }
@@ -336,6 +342,16 @@ impl<T: Transport + 'static> Agent<T> {
     pub fn new(mut config: AgentConfig, transport: T, clock: Arc<dyn Clock>) -> Result<Self, AgentError> {
         if config.id.0 >= AgentId::LIMIT {
             return Err(AgentError::InvalidId(config.id.0));
+        }
+        if !config.join_wait.is_zero() && config.join_wait <= config.answer_hold + config.join_retry {
+            tracing::warn!(
+                "{}: join wait {:?} is not above the answer hold {:?} plus a retry {:?}: if a graph answer is lost, \
+                 this agent starts alone before a peer answers again",
+                config.id,
+                config.join_wait,
+                config.answer_hold,
+                config.join_retry
+            );
         }
         let now = clock.now_ns();
         let nonce = config.nonce.unwrap_or_else(random_nonce);

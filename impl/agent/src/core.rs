@@ -34,8 +34,6 @@ use crate::AgentId;
 use crate::envelope::{MAX_BATCH, Message};
 use crate::mutants::{Plant, ProtocolMutant};
 
-/// How long a graph request stays answered (a repeat within it gets no second copy).
-pub const ANSWER_HOLD_NS: u64 = 1_000_000_000;
 /// Most remembered answered requests.
 pub const MAX_ANSWERED: usize = 1024;
 /// Largest incarnation plus one (replica ids are 32 bits, 12 of them the agent id).
@@ -62,6 +60,10 @@ pub struct ProtocolConfig {
     pub max_buffered_deltas: usize,
     /// Most bytes of deltas in one anti-entropy answer.
     pub max_batch_bytes: usize,
+    /// How long a graph request stays answered: a joiner's repeat within it gets no second copy (a large answer
+    /// may still be on its way), one after it does (the answer may have been lost). A joiner whose answer was lost
+    /// is served again only after this, so its join wait must be longer than this plus a join retry.
+    pub answer_hold_ns: u64,
     /// A planted protocol bug (always none without the `mutants` feature).
     pub plant: Plant,
 }
@@ -670,12 +672,12 @@ impl AgentCore {
     }
 
     fn answer_graph_request(&mut self, from: AgentId, nonce: u64, now_ns: u64, out: &mut Output) {
-        let recent = self.answered.get(&(from, nonce)).is_some_and(|at| now_ns.saturating_sub(*at) < ANSWER_HOLD_NS);
+        let recent = self.answered.get(&(from, nonce)).is_some_and(|at| now_ns.saturating_sub(*at) < self.config.answer_hold_ns);
         if recent {
             return;
         }
         let Some((snapshot, from_cache)) = self.snapshot_bytes() else { return };
-        self.answered.retain(|_, at| now_ns.saturating_sub(*at) < ANSWER_HOLD_NS);
+        self.answered.retain(|_, at| now_ns.saturating_sub(*at) < self.config.answer_hold_ns);
         if self.answered.len() < MAX_ANSWERED {
             self.answered.insert((from, nonce), now_ns);
         }
