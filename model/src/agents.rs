@@ -78,13 +78,13 @@ pub struct AgentsConfig {
 impl Default for AgentsConfig {
     fn default() -> Self {
         AgentsConfig {
-            agents: 3,
+            agents: 2,
             writes: 2,
             losses: 1,
-            duplicates: 1,
+            duplicates: 0,
             crashes: 1,
             cuts: 1,
-            ticks: 6,
+            ticks: 4,
             history: 2,
             mutant: None,
             #[cfg(feature = "mutants")]

@@ -4,9 +4,11 @@
 //! Only with the `mutants` feature, which enables the switches in `dsr` and `bica`; a normal build cannot plant
 //! anything.
 
+use agent::mutants::ProtocolMutant;
 use dsr::DsrMutant;
 use serde::Serialize;
 
+use crate::agents::{AgentsConfig, check_agents};
 use crate::convergence::{ConvergenceConfig, NetworkKind, check_convergence};
 use crate::report::{CheckOptions, CheckReport, CounterExample, Search};
 use crate::scheduler::{check_scheduler, scheduler_mutants};
@@ -97,9 +99,67 @@ pub fn check_scheduler_mutants(progress: bool) -> Vec<MutantResult> {
         .collect()
 }
 
-/// Runs every mutant of both models.
+/// The smallest agents configuration whose faults can expose each protocol mutant, and the property meant to
+/// kill it.
+pub fn agent_mutant_configs() -> Vec<(ProtocolMutant, AgentsConfig, &'static str)> {
+    use crate::agents::properties as p;
+    let quiet = AgentsConfig {
+        agents: 2,
+        writes: 0,
+        losses: 0,
+        duplicates: 0,
+        crashes: 0,
+        cuts: 0,
+        ticks: 3,
+        ..Default::default()
+    };
+    ProtocolMutant::ALL
+        .into_iter()
+        .map(|mutant| {
+            let (config, property) = match mutant {
+                // A lost delta, then a later one of the same writer.
+                ProtocolMutant::NoGapRequest => (AgentsConfig { writes: 2, losses: 1, ..quiet.clone() }, p::GAP_ASKED),
+                // A restart whose new life joins a graph that shows nothing of the first life.
+                ProtocolMutant::IncarnationForgotten => {
+                    (AgentsConfig { crashes: 1, ticks: 5, ..quiet.clone() }, p::UNIQUE_LIVES)
+                }
+                // A write that reaches a joiner before its graph does.
+                ProtocolMutant::DropEarlyDelta => (AgentsConfig { writes: 1, ..quiet.clone() }, p::EARLY_KEPT),
+                // A lost write and a lost quiet announce: only a periodic announce would repair them.
+                ProtocolMutant::AnnounceTimerLost => {
+                    (AgentsConfig { writes: 1, losses: 2, ticks: 4, ..quiet.clone() }, p::SETTLES)
+                }
+                // A lost graph request.
+                ProtocolMutant::JoinRequestOnce => (AgentsConfig { losses: 1, ..quiet.clone() }, p::JOINER_SERVED),
+                // A lost answer to a missing-request.
+                ProtocolMutant::PendingAskNeverExpires => {
+                    (AgentsConfig { writes: 2, losses: 2, ticks: 4, ..quiet.clone() }, p::SETTLES)
+                }
+            };
+            (mutant, config.with_mutant(mutant), property)
+        })
+        .collect()
+}
+
+/// Runs every protocol mutant through the agents model.
+pub fn check_agent_mutants(progress: bool) -> Vec<MutantResult> {
+    agent_mutant_configs()
+        .into_iter()
+        .map(|(mutant, config, property)| {
+            let report = check_agents(&config, &mutant_options(progress));
+            let mut result = MutantResult::from_report(format!("agent::{mutant:?}"), report);
+            if let Some(expected) = result.report.failures().find(|p| p.name == property) {
+                result.counterexample = expected.path.clone();
+            }
+            result
+        })
+        .collect()
+}
+
+/// Runs every mutant of the three models.
 pub fn check_all_mutants(progress: bool) -> Vec<MutantResult> {
     let mut results = check_dsr_mutants(progress);
     results.extend(check_scheduler_mutants(progress));
+    results.extend(check_agent_mutants(progress));
     results
 }

@@ -89,7 +89,7 @@ fn parse_network(text: &str) -> Result<NetworkKind, String> {
 #[derive(Debug, Args)]
 struct AgentsArgs {
     /// Number of agents.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 2)]
     agents: usize,
     /// Local writes, shared by all agents.
     #[arg(long, default_value_t = 2)]
@@ -98,7 +98,7 @@ struct AgentsArgs {
     #[arg(long, default_value_t = 1)]
     losses: usize,
     /// Messages the network may deliver twice.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 0)]
     duplicates: usize,
     /// Crashes (each may be followed by a restart as a new life).
     #[arg(long, default_value_t = 1)]
@@ -107,7 +107,7 @@ struct AgentsArgs {
     #[arg(long, default_value_t = 1)]
     cuts: usize,
     /// Timer ticks, shared by all agents.
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 4)]
     ticks: usize,
     #[command(flatten)]
     common: CommonArgs,

@@ -672,7 +672,8 @@ impl AgentCore {
     }
 
     fn answer_graph_request(&mut self, from: AgentId, nonce: u64, now_ns: u64, out: &mut Output) {
-        let recent = self.answered.get(&(from, nonce)).is_some_and(|at| now_ns.saturating_sub(*at) < self.config.answer_hold_ns);
+        let recent =
+            self.answered.get(&(from, nonce)).is_some_and(|at| now_ns.saturating_sub(*at) < self.config.answer_hold_ns);
         if recent {
             return;
         }

@@ -1,0 +1,36 @@
+//! The agents model on small configurations: every `always` property holds (unique lives, bounded buffers,
+//! invariants, gap requests, early deltas kept, settling to the specification once the faults stop, joiners
+//! served), and the unique state counts are pinned so that a change to the state space (in the model or in the
+//! agent core) is noticed and looked at before the number is updated. The `sometimes` witnesses need larger budgets
+//! (`cortex check agents` with its defaults reaches every one).
+
+use model::agents::{AgentsConfig, check_agents};
+use model::{CheckOptions, CheckReport};
+
+fn check(config: AgentsConfig) -> CheckReport {
+    let report = check_agents(&config, &CheckOptions::default());
+    let failures: Vec<_> = report.failures().filter(|p| p.expectation != "sometimes").collect();
+    assert!(failures.is_empty(), "{}", report.to_text());
+    assert!(report.complete);
+    report
+}
+
+fn quiet() -> AgentsConfig {
+    AgentsConfig { agents: 2, writes: 1, losses: 0, duplicates: 0, crashes: 0, cuts: 0, ticks: 3, ..Default::default() }
+}
+
+#[test]
+fn a_crash_a_cut_a_loss_and_a_duplicate_all_settle_to_the_specification() {
+    let config = AgentsConfig { losses: 1, duplicates: 1, crashes: 1, cuts: 1, ..quiet() };
+    assert_eq!(check(config).unique_states, 24_662);
+}
+
+#[test]
+fn lost_writes_are_repaired() {
+    assert_eq!(check(AgentsConfig { writes: 2, losses: 1, ..quiet() }).unique_states, 6_535);
+}
+
+#[test]
+fn three_agents_join_one_graph() {
+    assert_eq!(check(AgentsConfig { agents: 3, ..quiet() }).unique_states, 5_155);
+}
