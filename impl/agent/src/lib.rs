@@ -17,12 +17,22 @@
 //! [`AgentConfig::join_retry`]; **any** running agent answers with a snapshot. An agent that hears no answer within
 //! [`AgentConfig::join_wait`] starts alone — from its seed graph (CORTEX JSON) if it has one — and never aborts.
 //!
-//! **Identity.** An agent id is the CORTEX 12-bit agent id. Each life of an agent takes the replica id
-//! `incarnation << 12 | agent_id`, with an incarnation above every one of its own seen in the graph it joined,
-//! so **a restarted agent never reuses the replica id, dots or minted node ids of an earlier life** that any peer
-//! has seen. Each life also draws a random nonce; a message carrying this agent id with another nonce (from a
-//! life not older than ours) is an **id collision**: it is logged, reported in [`AgentStatus`], and the agent
-//! refuses local writes from then on, so two lives never mint the same dots.
+//! **Identity.** An agent id is the CORTEX 12-bit agent id that users type. Each life of an agent takes the
+//! replica id `incarnation << 12 | agent_id`, so its dots and minted node ids are its own. The incarnation is above
+//! every incarnation of this agent id seen in the graph it joined (announces, snapshots) and above the one its
+//! previous life recorded ([`AgentConfig::life_file`]: `cortex agent` keeps one per agent id and graph in its state
+//! directory, written durably before the life's first write). Without a record the floor is a random number below
+//! 2^16 drawn from the life's nonce. **What is guaranteed:** two lives of one agent id never share a replica id when
+//! they ran with the same life file, or when the later one joined a graph that held any operation of the earlier
+//! one; otherwise (no record, and nothing of the earlier life reachable) they share one with probability at most
+//! 2^-16. A reuse that shows anyway — a peer holds operations of this life's replica id that this life did not
+//! make — and a message carrying this agent id from another life not older than this one (another nonce) are **id
+//! collisions**: logged, reported in [`AgentStatus`], and local writes are refused from then on, so two lives never
+//! mint the same dots silently. No server and no reachable peer is needed for any of this.
+//!
+//! **The protocol core.** Every protocol decision is made by [`core::AgentCore`], a pure state machine (no I/O,
+//! threads, locks or clock reads): the threaded [`Agent`], the seeded simulations and the Stateright agents model
+//! (`model::agents`, with loss, duplication, reordering, crashes, restarts and cuts) run it unchanged.
 //!
 //! **Anti-entropy.** Every [`AgentConfig::announce_period`] an agent announces its causal context. An agent that
 //! sees in an announce dots it lacks asks that peer ([`envelope::Message::MissingRequest`]); the peer answers with
