@@ -25,7 +25,7 @@ if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/de
     ip addr add 198.18.0.1/32 dev lo
     exec "$@"' sh \
     cargo test --offline -p transport -p agent -p harness \
-      --test rtps_loopback --test calls --test agents_multiprocess --test agents_roles
+      --test rtps_loopback --test calls --test agents_multiprocess --test agents_roles --test agents_pause
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi

@@ -43,7 +43,24 @@ enum Command {
     MeasureReceiver(commands::receiver::ReceiverArgs),
 }
 
+/// Sends log records to standard error, filtered by `RUST_LOG` (default `warn`): this program's `tracing` events and,
+/// through the `log` bridge, the `log` records of `rustdds`. Standard output stays for results (JSON status lines,
+/// reports), so a reader of those never sees a log line.
+fn init_logging() {
+    use std::io::IsTerminal;
+    use tracing_subscriber::filter::{EnvFilter, LevelFilter};
+    let filter = EnvFilter::builder().with_default_directive(LevelFilter::WARN.into()).from_env_lossy();
+    // `try_init` also installs the `log` bridge (the `tracing-log` feature). It fails only if a subscriber is
+    // already set, which nothing here does.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .try_init();
+}
+
 fn main() -> ExitCode {
+    init_logging();
     let cli = Cli::parse();
     let outcome = match cli.command {
         Command::Graph(args) => commands::graph::run(args),

@@ -342,6 +342,8 @@ fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> s
             counts
         }),
         "wire_bytes_sent": status.transport.wire_bytes_sent,
+        "participant_failures": status.transport.participant_failures,
+        "participant_rebuilds": status.transport.participant_rebuilds,
     })
 }
 

@@ -222,6 +222,14 @@ pub struct TransportStats {
     pub dropped_injected: u64,
     /// Extra copies delivered on purpose (fault injection: duplication).
     pub duplicated_injected: u64,
+    /// Times the transport found its DDS engine dead (RTPS: `rustdds`'s threads of its participants ended, see
+    /// [`rtps`], "Recovery"). From then until the matching rebuild it neither sends nor receives.
+    #[serde(default)]
+    pub participant_failures: u64,
+    /// Times the transport rebuilt its participants, writers and readers after such a failure. Fewer rebuilds
+    /// than failures: a rebuild is under way (or failing, which the log says).
+    #[serde(default)]
+    pub participant_rebuilds: u64,
 }
 
 /// Atomic counters behind [`TransportStats`].
@@ -233,6 +241,8 @@ pub struct Counters {
     samples_received: AtomicU64,
     payload_bytes_received: AtomicU64,
     dropped_full: AtomicU64,
+    participant_failures: AtomicU64,
+    participant_rebuilds: AtomicU64,
 }
 
 impl Counters {
@@ -265,6 +275,16 @@ impl Counters {
         self.dropped_full.fetch_add(1, Ordering::Relaxed);
     }
 
+    /// Counts one failure of the transport's DDS engine ([`TransportStats::participant_failures`]).
+    pub fn participant_failed(&self) {
+        self.participant_failures.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Counts one rebuild of the transport's DDS entities ([`TransportStats::participant_rebuilds`]).
+    pub fn participant_rebuilt(&self) {
+        self.participant_rebuilds.fetch_add(1, Ordering::Relaxed);
+    }
+
     /// The current values.
     pub fn snapshot(&self) -> TransportStats {
         TransportStats {
@@ -276,6 +296,8 @@ impl Counters {
             dropped_full: self.dropped_full.load(Ordering::Relaxed),
             dropped_injected: 0,
             duplicated_injected: 0,
+            participant_failures: self.participant_failures.load(Ordering::Relaxed),
+            participant_rebuilds: self.participant_rebuilds.load(Ordering::Relaxed),
         }
     }
 }

@@ -66,6 +66,27 @@
 //! the graph as soon as a peer can hear it. (rustdds sends a new participant's first discovery announcement 100 ms
 //! after it is created — a constant of rustdds 0.15, not a setting — so no peer is found sooner than that.)
 //!
+//! **Recovery** (issue 14). `rustdds` 0.15 runs two threads per participant — its event loop
+//! (`DPEventLoop::event_loop`, `rtps/dp_event_loop.rs`) and discovery (`Discovery::discovery_event_loop`,
+//! `discovery/discovery.rs`) — and each returns, ending the thread, on any error of its `mio` `Poll::poll`,
+//! `ErrorKind::Interrupted` included (mio 1 no longer retries EINTR itself). On Linux a thread blocked in `epoll_wait`
+//! fails with EINTR when its process is resumed (SIGCONT) after a stop signal (SIGSTOP, SIGTSTP), with or without a
+//! signal handler; `SA_RESTART` does not apply to `epoll_wait`, and SIGSTOP cannot be caught, blocked or ignored, so
+//! nothing outside `rustdds` keeps its threads alive. Without them a participant neither sends, receives, nor answers
+//! discovery, for good: a stopped and resumed agent was deaf and mute, and a new agent found nobody and started alone.
+//! So the receiving thread watches those threads (found by name in `/proc/self/task` when the participants are created,
+//! one at a time per process; checked with a few small reads every 500 ms, and 50 ms after its own `poll` was
+//! interrupted). When one has ended it says so with an error, builds new participants with all their topics, writers
+//! and readers, swaps the writers in (each lock held only for its swap), serves the new readers, and drops the old
+//! ones; a failed rebuild is logged and tried again, at most one rebuild a second. The transport's endpoint id changes
+//! (the new publishing participant's GUID prefix), peers discover it like a new process, [`Transport::sync_matches`]
+//! grows with the new matches (a joining agent asks for the graph again), and what was written in the gap is repaired
+//! by the agents' anti-entropy. [`TransportStats`] counts failures and rebuilds. Peers keep the dead participant's
+//! readers matched until its lease runs out (50 s in `rustdds` 0.15), so meanwhile their pacing of large samples waits
+//! in vain for those readers' acknowledgements (up to [`RtpsConfig::max_blocking`] per [`RtpsConfig::pace_bytes`]), as
+//! it does for any peer that vanished without leaving. Where `/proc/self/task` does not exist (not Linux) the threads
+//! are not watched, and a warning says so when the transport starts.
+//!
 //! Wire bytes are estimated per sample as the payload plus its CDR header and length (8 B) padded to 4, the RTPS
 //! DATA submessage (24 B), for a reliable sample the heartbeat beside it (32 B), and one RTPS header plus UDP/IPv4
 //! header (48 B) per datagram of up to 64 KiB ([`estimated_wire_bytes`]; exact for an unfragmented sample:
@@ -407,35 +428,71 @@ fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPolicies {
 }
 
 /// One writer and one reader per channel: the writers in a publishing DDS participant, the readers in a subscribing
-/// one (the same participant if [`RtpsConfig::separate_reader_participant`] is off).
+/// one (the same participant if [`RtpsConfig::separate_reader_participant`] is off). If `rustdds`'s own threads
+/// of these participants end, the receiving thread builds them again with new writers and readers and swaps them
+/// in (see the module documentation, "Recovery").
 pub struct RtpsTransport {
-    // Writers and the receiving thread (which owns the readers) before the participants, so they are dropped first.
-    writers: Vec<Mutex<Writer>>,
-    /// The best-effort updates writer and the largest sample it takes ([`UpdateDelivery::BestEffort`]).
-    best_effort: Option<(Mutex<Writer>, usize)>,
+    /// The writers and participants in use, shared with the receiving thread, which owns the readers and swaps in
+    /// new ones after a rebuild. Dropped after the receiving thread has ended.
+    shared: Arc<Shared>,
     inbox: Receiver<Sample>,
     /// Where received samples go instead of the inbox, while set ([`Transport::set_sink`]); locked during a call.
     sink: Arc<Mutex<Option<Sink>>>,
     stop: Arc<AtomicBool>,
     receiver: Option<JoinHandle<()>>,
     counters: Arc<Counters>,
-    local: EndpointId,
     unpaced_large_bytes: AtomicUsize,
     discovery: Arc<DiscoveryState>,
     config: RtpsConfig,
     multicast: bool,
-    /// The GUID prefix of the participant holding this transport's readers (told to peers, see [`READERS_AT`]).
-    reading_prefix: Prefix,
+}
+
+/// The part of the DDS entities in use that publishing needs; the receiving thread replaces each of them in place
+/// when it rebuilds the participants. Fields drop in order: the writers before the participants.
+struct Shared {
+    /// One writer per channel (by [`Channel::index`]).
+    writers: Vec<Mutex<Writer>>,
+    /// The best-effort updates writer and the largest sample it takes ([`UpdateDelivery::BestEffort`]).
+    best_effort: Option<(Mutex<Writer>, usize)>,
+    /// This transport's endpoint id (its publishing participant's GUID prefix, which tags its samples) and the GUID
+    /// prefix of the participant holding its readers (told to peers, see [`READERS_AT`]).
+    identity: Mutex<(EndpointId, Prefix)>,
+    participants: Mutex<Participants>,
+}
+
+/// The participants of one generation of DDS entities.
+struct Participants {
     _publishing: DomainParticipant,
     /// The readers' own participant (see [`RtpsTransport::new`]); `None` only when neither
     /// `separate_reader_participant` nor multicast asks for it.
     _subscribing: Option<DomainParticipant>,
 }
 
+/// A full set of DDS entities, as [`Generation::build`] makes them: at start, and at every rebuild.
+/// Fields drop in order: the writers and readers before the participants.
+struct Generation {
+    writers: Vec<Writer>,
+    best_effort: Option<Writer>,
+    reading: Reading,
+    local: EndpointId,
+    reading_prefix: Prefix,
+    participants: Participants,
+}
+
+/// What the receiving thread owns of a generation.
+struct Reading {
+    readers: Vec<(Channel, Reader)>,
+    watch: DiscoveryWatch,
+    /// The endpoint id of this generation's writers: samples from it are this transport's own.
+    local: EndpointId,
+    /// The threads `rustdds` runs for this generation's participants (empty where they cannot be watched).
+    engine: Vec<EngineThread>,
+}
+
 impl std::fmt::Debug for RtpsTransport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("RtpsTransport")
-            .field("local", &self.local)
+            .field("local", &self.local_id())
             .field("config", &self.config)
             .field("multicast", &self.multicast)
             .finish()
@@ -455,21 +512,70 @@ fn endpoint_of(guid: rustdds::GUID) -> EndpointId {
     EndpointId(u128::from_be_bytes(wide))
 }
 
-impl RtpsTransport {
-    /// Joins the DDS domain (one or two participants, see [`RtpsConfig::separate_reader_participant`]) and starts
-    /// the receiving thread.
-    ///
-    /// With multicast ([`RtpsConfig::multicast`]) the readers always live in a second participant of their own,
-    /// whatever `separate_reader_participant` says. A `rustdds` writer also sends to the readers of its own
-    /// participant, and it never learns a route to its own participant (it does not record where its own traffic
-    /// arrives), so that reader takes the fallback path, whose sends are de-duplicated separately from the routed
-    /// ones: every sample would go to the multicast group twice. A reader in another participant is routed like
-    /// any remote reader, and its multicast route is the one datagram all readers share.
-    ///
-    /// # Errors
-    /// [`TransportError::Setup`] if a participant, a topic, a reader or a writer cannot be created.
-    pub fn new(config: RtpsConfig) -> Result<Self, TransportError> {
-        let multicast = config.multicast.resolve();
+/// One of the threads `rustdds` 0.15 runs per participant ("RustDDS Participant N event loop", "RustDDS discovery
+/// thread"), known by its Linux thread id and its name as `/proc` shows it (15 bytes at most). While a participant
+/// exists, both threads must run: each ends only when the participant is dropped — or, in `rustdds` 0.15, on any
+/// error of its `poll` (see the module documentation, "Recovery").
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct EngineThread {
+    tid: u32,
+    name: String,
+}
+
+/// Prefix of the names of `rustdds`'s threads.
+const ENGINE_THREAD_PREFIX: &str = "RustDDS";
+
+/// Participants are created one at a time in this process, so that the `rustdds` threads that appear during a
+/// creation are that creation's (see [`EngineThread`]).
+static CREATING_PARTICIPANTS: Mutex<()> = Mutex::new(());
+
+impl EngineThread {
+    /// The `rustdds` threads of this process now; empty where `/proc/self/task` cannot be read (not Linux).
+    fn all() -> Vec<EngineThread> {
+        let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return Vec::new() };
+        tasks
+            .filter_map(|task| {
+                let task = task.ok()?;
+                let tid = task.file_name().to_str()?.parse().ok()?;
+                let name = std::fs::read_to_string(task.path().join("comm")).ok()?;
+                let name = name.trim_end_matches('\n');
+                name.starts_with(ENGINE_THREAD_PREFIX).then(|| EngineThread { tid, name: name.to_owned() })
+            })
+            .collect()
+    }
+
+    /// Whether the thread still runs: it is in `/proc/self/task` under its name (a thread id reused by another
+    /// thread has another name). An unreadable entry for any other reason than its absence counts as running.
+    fn alive(&self) -> bool {
+        match std::fs::read_to_string(format!("/proc/self/task/{}/comm", self.tid)) {
+            Ok(name) => name.trim_end_matches('\n') == self.name,
+            Err(error) => error.kind() != std::io::ErrorKind::NotFound,
+        }
+    }
+}
+
+/// How often the receiving thread checks that `rustdds`'s threads still run (a few small `/proc` reads).
+const ENGINE_CHECK_PERIOD: Duration = Duration::from_millis(500);
+/// After the receiving thread's own `poll` was interrupted (EINTR: the process was stopped and resumed, or a
+/// signal arrived), `rustdds`'s threads were likely interrupted too: check them this soon.
+const ENGINE_CHECK_AFTER_EINTR: Duration = Duration::from_millis(50);
+/// Shortest time between two rebuilds, so a generation that dies at once is not rebuilt in a tight loop.
+const MIN_REBUILD_INTERVAL: Duration = Duration::from_secs(1);
+/// Longest wait before another attempt when a rebuild fails.
+const MAX_REBUILD_RETRY: Duration = Duration::from_secs(10);
+
+/// The largest best-effort sample of `config`, if its updates go best-effort.
+fn best_effort_max_bytes(config: &RtpsConfig) -> Option<usize> {
+    match config.updates {
+        UpdateDelivery::Reliable => None,
+        UpdateDelivery::BestEffort { max_bytes } => Some(max_bytes),
+    }
+}
+
+impl Generation {
+    /// Joins the DDS domain with new participants and creates every topic, writer and reader in them (see
+    /// [`RtpsTransport::new`]); `state` is where the new readers' discovery events are recorded.
+    fn build(config: &RtpsConfig, multicast: bool, state: &Arc<DiscoveryState>) -> Result<Generation, TransportError> {
         let networks = if multicast { routable_ipv4_addresses() } else { None };
         let join = |role: &str| {
             let mut builder = DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast);
@@ -481,12 +587,28 @@ impl RtpsTransport {
                 detail: format!("{e:?}"),
             })
         };
-        let publishing = join("publishing")?;
-        // Multicast needs the readers apart too: rustdds never routes a writer to its own participant's readers,
-        // and their fallback path would send a second copy.
-        let subscribing =
-            if config.separate_reader_participant || multicast { Some(join("subscribing")?) } else { None };
-        let qos = qos(&config);
+        let (publishing, subscribing, engine) = {
+            let _creating = CREATING_PARTICIPANTS.lock().unwrap_or_else(|p| p.into_inner());
+            let before = EngineThread::all();
+            let publishing = join("publishing")?;
+            // Multicast needs the readers apart too: rustdds never routes a writer to its own participant's
+            // readers, and their fallback path would send a second copy.
+            let subscribing =
+                if config.separate_reader_participant || multicast { Some(join("subscribing")?) } else { None };
+            let engine: Vec<EngineThread> = EngineThread::all().into_iter().filter(|t| !before.contains(t)).collect();
+            (publishing, subscribing, engine)
+        };
+        let participants = 1 + usize::from(subscribing.is_some());
+        if engine.len() != 2 * participants {
+            tracing::warn!(
+                "rtps: found {} rustdds threads for {participants} new participant(s), expected {}: a participant \
+                 whose threads end may go unnoticed (no /proc/self/task, or participants created elsewhere in this \
+                 process at the same time)",
+                engine.len(),
+                2 * participants
+            );
+        }
+        let qos = qos(config);
         let publisher = publishing.create_publisher(&qos).map_err(setup("publisher"))?;
         let subscriber =
             subscribing.as_ref().unwrap_or(&publishing).create_subscriber(&qos).map_err(setup("subscriber"))?;
@@ -523,22 +645,22 @@ impl RtpsTransport {
             let writer = writer(&written, &name, &qos)?;
             let reader = reader(&read, &name, &qos)?;
             endpoints.push((channel, writer.guid(), reader.guid()));
-            writers.push(Mutex::new(writer));
+            writers.push(writer);
             readers.push((channel, reader));
         }
         // Every transport reads the best-effort updates topic, so agents of one graph may mix settings; only a
         // transport set to best-effort writes on it.
         let best_effort = {
             let name = format!("{}_updates_be", config.topic_prefix);
-            let qos = qos_with(&config, Reliability::BestEffort);
+            let qos = qos_with(config, Reliability::BestEffort);
             let (written, read) = topics(&name, &qos)?;
             let reader = reader(&read, &name, &qos)?;
-            let writer = match config.updates {
-                UpdateDelivery::Reliable => None,
-                UpdateDelivery::BestEffort { max_bytes } => {
+            let writer = match best_effort_max_bytes(config) {
+                None => None,
+                Some(_) => {
                     let writer = writer(&written, &name, &qos)?;
                     endpoints.push((Channel::Updates, writer.guid(), reader.guid()));
-                    Some((Mutex::new(writer), max_bytes))
+                    Some(writer)
                 }
             };
             readers.push((Channel::Updates, reader));
@@ -546,44 +668,80 @@ impl RtpsTransport {
         };
         // Samples are tagged with their writer's GUID prefix: the publishing participant's.
         let local = endpoint_of(publishing.guid());
-        let discovery = Arc::new(DiscoveryState::default());
-        discovery.times.lock().unwrap_or_else(|p| p.into_inner()).created_ns = SystemClock.now_ns();
         // Discovery events of both participants: the writers' matches come from the publishing one, the readers'
         // from the subscribing one.
         let mut statuses = vec![publishing.status_listener()];
         statuses.extend(subscribing.as_ref().map(DomainParticipant::status_listener));
         let reading_prefix = prefix_of(subscribing.as_ref().unwrap_or(&publishing).guid());
+        let own = vec![prefix_of(publishing.guid()), reading_prefix];
+        let watch = DiscoveryWatch { statuses, own, endpoints, state: Arc::clone(state) };
+        Ok(Generation {
+            writers,
+            best_effort,
+            local,
+            reading_prefix,
+            participants: Participants { _publishing: publishing, _subscribing: subscribing },
+            reading: Reading { readers, watch, local, engine },
+        })
+    }
+}
+
+impl RtpsTransport {
+    /// Joins the DDS domain (one or two participants, see [`RtpsConfig::separate_reader_participant`]) and starts
+    /// the receiving thread.
+    ///
+    /// With multicast ([`RtpsConfig::multicast`]) the readers always live in a second participant of their own,
+    /// whatever `separate_reader_participant` says. A `rustdds` writer also sends to the readers of its own
+    /// participant, and it never learns a route to its own participant (it does not record where its own traffic
+    /// arrives), so that reader takes the fallback path, whose sends are de-duplicated separately from the routed
+    /// ones: every sample would go to the multicast group twice. A reader in another participant is routed like
+    /// any remote reader, and its multicast route is the one datagram all readers share.
+    ///
+    /// # Errors
+    /// [`TransportError::Setup`] if a participant, a topic, a reader or a writer cannot be created.
+    pub fn new(config: RtpsConfig) -> Result<Self, TransportError> {
+        let multicast = config.multicast.resolve();
+        let discovery = Arc::new(DiscoveryState::default());
+        let generation = Generation::build(&config, multicast, &discovery)?;
+        discovery.times.lock().unwrap_or_else(|p| p.into_inner()).created_ns = SystemClock.now_ns();
+        let Generation { writers, best_effort, local, reading_prefix, participants, reading } = generation;
+        let shared = Arc::new(Shared {
+            writers: writers.into_iter().map(Mutex::new).collect(),
+            best_effort: best_effort.zip(best_effort_max_bytes(&config)).map(|(w, max)| (Mutex::new(w), max)),
+            identity: Mutex::new((local, reading_prefix)),
+            participants: Mutex::new(participants),
+        });
         let (sender, inbox) = bounded(config.inbox_capacity.max(1));
         let sink = Arc::new(Mutex::new(None));
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(Counters::default());
         let receiver = {
+            let outlet = Outlet { inbox: sender, sink: Arc::clone(&sink), counters: Arc::clone(&counters) };
+            let rebuild = Rebuild {
+                config: config.clone(),
+                multicast,
+                shared: Arc::clone(&shared),
+                discovery: Arc::clone(&discovery),
+                counters: Arc::clone(&counters),
+                last: None,
+            };
             let stop = Arc::clone(&stop);
-            let counters = Arc::clone(&counters);
-            let own = vec![prefix_of(publishing.guid()), reading_prefix];
-            let watch = DiscoveryWatch { statuses, own, endpoints, state: Arc::clone(&discovery) };
-            let outlet = Outlet { inbox: sender, sink: Arc::clone(&sink), counters };
             std::thread::Builder::new()
                 .name("rtps-receive".into())
-                .spawn(move || receive_loop(readers, watch, outlet, stop, local))
+                .spawn(move || receive_loop(reading, rebuild, outlet, &stop))
                 .map_err(|e| TransportError::Setup { what: "receiving thread".into(), detail: e.to_string() })?
         };
         Ok(RtpsTransport {
-            writers,
-            best_effort,
+            shared,
             inbox,
             sink,
             stop,
             receiver: Some(receiver),
             counters,
-            local,
             unpaced_large_bytes: AtomicUsize::new(0),
             discovery,
             config,
             multicast,
-            reading_prefix,
-            _publishing: publishing,
-            _subscribing: subscribing,
         })
     }
 
@@ -598,6 +756,7 @@ impl RtpsTransport {
     }
 
     /// When discovery found the first peer and matched each channel's writer and reader (see [`DiscoveryTimes`]).
+    /// After a rebuild of the participants these stay the first generation's times.
     pub fn discovery(&self) -> DiscoveryTimes {
         *self.discovery.times.lock().unwrap_or_else(|p| p.into_inner())
     }
@@ -722,25 +881,54 @@ impl Outlet {
     }
 }
 
-fn receive_loop(
-    mut readers: Vec<(Channel, Reader)>,
-    mut watch: DiscoveryWatch,
-    outlet: Outlet,
-    stop: Arc<AtomicBool>,
-    local: EndpointId,
-) {
+/// Why [`serve`] returned.
+enum Ended {
+    /// The transport is stopping (or its inbox is gone).
+    Stopped,
+    /// The generation can no longer receive: what happened.
+    Broken(String),
+}
+
+/// The receiving thread: serves the readers of the current generation and, when `rustdds`'s threads of it have
+/// ended, rebuilds the participants, writers and readers and serves the new ones.
+fn receive_loop(mut reading: Reading, mut rebuild: Rebuild, outlet: Outlet, stop: &AtomicBool) {
+    loop {
+        let why = match serve(&mut reading, &outlet, stop) {
+            Ended::Stopped => return,
+            Ended::Broken(why) => why,
+        };
+        outlet.counters.participant_failed();
+        tracing::error!(
+            "RTPS participant event loop died ({why}); this transport ({}) neither sends nor receives until it \
+             is rebuilt; rebuilding its participants, writers and readers",
+            reading.local
+        );
+        let Some((new, old)) = rebuild.run(stop) else { return };
+        // The old generation goes in the order its parts depend on each other: writers, readers, participants.
+        let old_reading = std::mem::replace(&mut reading, new);
+        drop(old.writers);
+        drop(old_reading);
+        drop(old.participants);
+        tracing::warn!(
+            "RTPS transport rebuilt (rebuild {}): it is now {}; peers discover it anew",
+            outlet.counters.snapshot().participant_rebuilds,
+            reading.local
+        );
+    }
+}
+
+/// Takes samples from `reading`'s readers until the transport stops or `rustdds`'s threads of this generation are
+/// found dead (checked every [`ENGINE_CHECK_PERIOD`], and soon after this thread's own `poll` was interrupted).
+fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool) -> Ended {
     use rustdds::mio1::{Events, Interest, Poll, Token};
     let mut poll = match Poll::new() {
         Ok(poll) => poll,
-        Err(error) => {
-            tracing::error!("rtps receive: cannot create a poller: {error}");
-            return;
-        }
+        Err(error) => return Ended::Broken(format!("cannot create a poller: {error}")),
     };
+    let Reading { readers, watch, local, engine } = reading;
     for (index, (channel, reader)) in readers.iter_mut().enumerate() {
         if let Err(error) = poll.registry().register(reader, Token(index), Interest::READABLE) {
-            tracing::error!("rtps receive: cannot register the {} reader: {error}", channel.name());
-            return;
+            return Ended::Broken(format!("cannot register the {} reader: {error}", channel.name()));
         }
     }
     for (i, status) in watch.statuses.iter_mut().enumerate() {
@@ -752,30 +940,46 @@ fn receive_loop(
         }
     }
     let mut events = Events::with_capacity(16);
+    let mut next_check = Instant::now() + ENGINE_CHECK_PERIOD;
     while !stop.load(Ordering::Relaxed) {
-        if let Err(error) = poll.poll(&mut events, Some(Duration::from_millis(20)))
-            && error.kind() != std::io::ErrorKind::Interrupted
-        {
-            tracing::error!("rtps receive: poll failed: {error}");
-            std::thread::sleep(Duration::from_millis(5));
+        match poll.poll(&mut events, Some(Duration::from_millis(20))) {
+            Ok(()) => {}
+            Err(error) if error.kind() == std::io::ErrorKind::Interrupted => {
+                next_check = next_check.min(Instant::now() + ENGINE_CHECK_AFTER_EINTR);
+            }
+            Err(error) => {
+                tracing::error!("rtps receive: poll failed: {error}");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+        let now = Instant::now();
+        if now >= next_check {
+            next_check = now + ENGINE_CHECK_PERIOD;
+            if let Some(dead) = engine.iter().find(|thread| !thread.alive()) {
+                return Ended::Broken(format!(
+                    "rustdds thread {:?} (tid {}) has ended; rustdds 0.15 ends it on any error of its poll, e.g. \
+                     EINTR when the process resumes after SIGSTOP",
+                    dead.name, dead.tid
+                ));
+            }
         }
         watch.drain();
         // Take from every reader each round: a notification may have been drained by an earlier round.
-        for (channel, reader) in &readers {
+        for (channel, reader) in readers.iter() {
             reader.drain_read_notifications();
             loop {
                 match reader.try_take_one() {
                     Ok(Some(change)) => {
                         let origin = endpoint_of(change.writer_guid());
-                        if origin == local {
+                        if origin == *local {
                             continue;
                         }
                         let Payload(bytes) = change.into_value();
                         if *channel == Channel::Sync && watch.state.learn_reading_prefix(origin, &bytes) {
                             continue;
                         }
-                        if !outlet.pass(Sample { channel: *channel, origin, bytes }, &stop) {
-                            return;
+                        if !outlet.pass(Sample { channel: *channel, origin, bytes }, stop) {
+                            return Ended::Stopped;
                         }
                     }
                     Ok(None) => break,
@@ -789,11 +993,91 @@ fn receive_loop(
             }
         }
     }
+    Ended::Stopped
+}
+
+/// What the receiving thread needs to rebuild the transport's DDS entities.
+struct Rebuild {
+    config: RtpsConfig,
+    multicast: bool,
+    shared: Arc<Shared>,
+    discovery: Arc<DiscoveryState>,
+    counters: Arc<Counters>,
+    /// When the last rebuild was done.
+    last: Option<Instant>,
+}
+
+/// What a rebuild took out of use, for the receiving thread to drop (with the old [`Reading`]) in order.
+struct Replaced {
+    writers: Vec<Writer>,
+    participants: Participants,
+}
+
+impl Rebuild {
+    /// Builds a new generation — retrying, with a growing pause, until it succeeds or the transport stops
+    /// (`None`) — and puts its writers, identity and participants in use. Returns the new generation's reading
+    /// part and what it replaced.
+    fn run(&mut self, stop: &AtomicBool) -> Option<(Reading, Replaced)> {
+        let mut pause = self.last.map_or(Duration::ZERO, |at| MIN_REBUILD_INTERVAL.saturating_sub(at.elapsed()));
+        loop {
+            if !sleep_unless_stopped(pause, stop) {
+                return None;
+            }
+            match Generation::build(&self.config, self.multicast, &self.discovery) {
+                Ok(generation) => return Some(self.install(generation)),
+                Err(error) => {
+                    pause = (pause * 2).clamp(MIN_REBUILD_INTERVAL, MAX_REBUILD_RETRY);
+                    tracing::error!(
+                        "RTPS transport rebuild failed: {error}; still neither sending nor receiving; trying again \
+                         in {pause:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Swaps `generation`'s writers, identity and participants in. Each lock is held only for its swap (a write in
+    /// progress on an old writer finishes first; what it wrote is lost with that writer, and agents repair it).
+    fn install(&mut self, generation: Generation) -> (Reading, Replaced) {
+        let Generation { writers, best_effort, local, reading_prefix, participants, reading } = generation;
+        let mut old = Vec::new();
+        for (slot, writer) in self.shared.writers.iter().zip(writers) {
+            old.push(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
+        }
+        if let (Some((slot, _)), Some(writer)) = (&self.shared.best_effort, best_effort) {
+            old.push(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
+        }
+        *self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()) = (local, reading_prefix);
+        // The readers the old writers matched are no address for the new ones; the new matches fill the lists.
+        for known in self.discovery.readers.lock().unwrap_or_else(|p| p.into_inner()).iter_mut() {
+            known.clear();
+        }
+        let participants =
+            std::mem::replace(&mut *self.shared.participants.lock().unwrap_or_else(|p| p.into_inner()), participants);
+        self.counters.participant_rebuilt();
+        self.last = Some(Instant::now());
+        (reading, Replaced { writers: old, participants })
+    }
+}
+
+/// Sleeps for `pause` in short steps; `false` as soon as `stop` is set.
+fn sleep_unless_stopped(pause: Duration, stop: &AtomicBool) -> bool {
+    let until = Instant::now() + pause;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return false;
+        }
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return true;
+        }
+        std::thread::sleep(left.min(Duration::from_millis(50)));
+    }
 }
 
 impl Transport for RtpsTransport {
     fn local_id(&self) -> EndpointId {
-        self.local
+        self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()).0
     }
 
     fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
@@ -838,8 +1122,9 @@ impl RtpsTransport {
         {
             // Before this sample: peers that matched since the last one learn where this transport's readers are
             // (a peer answering a request in this sample can then address the reply to them alone).
+            let reading_prefix = self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()).1;
             let mut announce = READERS_AT.to_vec();
-            announce.extend_from_slice(&self.reading_prefix);
+            announce.extend_from_slice(&reading_prefix);
             self.write_sample(Channel::Sync, Bytes::from(announce), None)?;
         }
         self.write_sample(channel, bytes, reader)
@@ -856,7 +1141,7 @@ impl RtpsTransport {
         }
         if channel == Channel::Updates
             && reader.is_none()
-            && let Some((writer, max_bytes)) = &self.best_effort
+            && let Some((writer, max_bytes)) = &self.shared.best_effort
             && size <= *max_bytes
         {
             // Best-effort never waits for acknowledgements; a full send buffer loses the sample, which the user of
@@ -868,7 +1153,7 @@ impl RtpsTransport {
             self.counters.sent(size, estimated_wire_bytes(size, false));
             return Ok(());
         }
-        let writer = self.writers[channel.index()].lock().unwrap_or_else(|p| p.into_inner());
+        let writer = self.shared.writers[channel.index()].lock().unwrap_or_else(|p| p.into_inner());
         let deadline = Instant::now() + self.config.max_blocking * 4;
         let payload = Payload(bytes);
         loop {
@@ -917,6 +1202,26 @@ mod tests {
         }
         let be = [0, 0, 0, 2, 7, 8];
         assert_eq!(&OctetsDecoder.decode_bytes(&be, RepresentationIdentifier::CDR_BE).unwrap().0[..], &[7, 8]);
+    }
+
+    #[test]
+    fn the_threads_of_new_participants_are_found_and_their_end_is_seen() {
+        if std::fs::read_dir("/proc/self/task").is_err() {
+            return; // Not Linux: nothing to watch.
+        }
+        let config = RtpsConfig { domain_id: 94, topic_prefix: "engine_threads".into(), ..RtpsConfig::default() };
+        let generation = Generation::build(&config, false, &Arc::new(DiscoveryState::default())).unwrap();
+        let threads = generation.reading.engine.clone();
+        // Two participants, each with its event loop and its discovery thread.
+        assert_eq!(threads.len(), 4, "{threads:?}");
+        assert_eq!(threads.iter().filter(|t| t.name.starts_with("RustDDS Partici")).count(), 2, "{threads:?}");
+        assert!(threads.iter().all(EngineThread::alive));
+        drop(generation);
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while threads.iter().any(EngineThread::alive) {
+            assert!(Instant::now() < deadline, "threads still running after their participants were dropped");
+            std::thread::sleep(Duration::from_millis(10));
+        }
     }
 
     #[test]
