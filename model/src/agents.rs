@@ -460,7 +460,12 @@ impl AgentsModel {
     fn tick(&self, state: &mut AgentsState, index: usize) {
         let slot = &mut state.slots[index];
         let Some(core) = slot.core.as_mut() else { return };
-        slot.now_ns = slot.now_ns.max(core.next_deadline_ns());
+        let deadline = core.next_deadline_ns();
+        if deadline == u64::MAX {
+            // Nothing will ever be due (a planted bug lost the timer): time does not jump to the end of time.
+            return;
+        }
+        slot.now_ns = slot.now_ns.max(deadline);
         let out = core.tick(slot.now_ns);
         self.emit(state, index, None, &out);
     }
@@ -662,7 +667,7 @@ impl AgentsModel {
                 // Time passes for every agent alike now: each clock moves one join retry per round.
                 let slot = &mut state.slots[index];
                 let Some(core) = slot.core.as_mut() else { continue };
-                slot.now_ns += RETRY_NS;
+                slot.now_ns = slot.now_ns.saturating_add(RETRY_NS);
                 let out = core.tick(slot.now_ns);
                 self.emit(&mut state, index, None, &out);
                 let mut budget = 10_000;
@@ -720,8 +725,9 @@ impl AgentsModel {
             .enumerate()
             .filter_map(|(index, slot)| {
                 let core = slot.core.as_ref().filter(|c| !c.is_ready())?;
-                let wait_end = core.joining_since_ns() + core.config().join_wait_ns;
-                let next_request = core.last_request_ns().map_or(slot.now_ns, |at| at + core.config().join_retry_ns);
+                let wait_end = core.joining_since_ns().saturating_add(core.config().join_wait_ns);
+                let next_request =
+                    core.last_request_ns().map_or(slot.now_ns, |at| at.saturating_add(core.config().join_retry_ns));
                 (next_request.max(slot.now_ns) < wait_end).then_some(index)
             })
             .collect();
