@@ -444,7 +444,8 @@ impl AgentsModel {
             *kind.borrow_mut() = Some((origin, r.clock(), recorded));
             Ok(((), vec![delta]))
         });
-        let Ok(((), out)) = result else { return };
+        let Ok(((), written)) = result else { return };
+        let out = Output { sends: written.sends(), changes: written.changes, events: Vec::new() };
         let (origin, stamp, recorded) = kind.into_inner().expect("the write ran");
         state.history.push(Arc::new(OpRecord {
             id: Dot::new(origin.replica, origin.first),

@@ -606,14 +606,14 @@ impl<T: Transport + 'static> Agent<T> {
         let agent = self.inner.config.id;
         let now = self.inner.clock.now_ns();
         let written = self.inner.lock().core.write(now, op);
-        let (result, out) = written.map_err(|refusal| match refusal {
+        let (result, written) = written.map_err(|refusal| match refusal {
             WriteRefusal::NotJoined => AgentError::NotJoined(agent),
             WriteRefusal::Collision(detail) => AgentError::IdCollision { agent, detail },
             WriteRefusal::Op(source) => AgentError::Op { agent, source },
         })?;
-        self.inner.send(out.sends, None);
-        let changes = out.changes;
-        self.inner.signal(changes);
+        // Encoded here, with the lock released.
+        self.inner.send(written.sends(), None);
+        self.inner.signal(written.changes);
         Ok(result)
     }
 

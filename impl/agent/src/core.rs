@@ -172,6 +172,28 @@ impl Output {
     }
 }
 
+/// What a local write produced.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Written {
+    /// The writer.
+    pub from: AgentId,
+    /// The deltas of the operation, in order.
+    pub deltas: Vec<Arc<Delta>>,
+    /// The replica's change events.
+    pub changes: Vec<ChangeEvent>,
+}
+
+impl Written {
+    /// The messages that publish the deltas to every agent (encoding each).
+    pub fn sends(&self) -> Vec<Send> {
+        let encode = |delta: &Arc<Delta>| Message::Delta { from: self.from, delta: Bytes::from(delta.encode()) };
+        self.deltas
+            .iter()
+            .map(|delta| Send { channel: Channel::Updates, message: encode(delta), dest: Dest::All })
+            .collect()
+    }
+}
+
 /// A received protocol message, with its deltas decoded (calls are not protocol messages).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Input {
@@ -563,7 +585,9 @@ impl AgentCore {
         out
     }
 
-    /// Runs a local operation on the replica at `now_ns`; its deltas go out on [`Channel::Updates`].
+    /// Runs a local operation on the replica at `now_ns`. Its deltas go out on [`Channel::Updates`]:
+    /// [`Written::sends`] encodes them, so that a caller holding a lock around the core can encode after releasing
+    /// it (a camera frame's encoding would otherwise keep readers waiting).
     ///
     /// # Errors
     /// [`WriteRefusal`]: not ready, an id collision, or the replica refused the operation (nothing changed).
@@ -571,21 +595,17 @@ impl AgentCore {
         &mut self,
         now_ns: u64,
         op: impl FnOnce(&mut Replica, u64) -> Result<(R, Vec<Arc<Delta>>), OpError>,
-    ) -> Result<(R, Output), WriteRefusal> {
+    ) -> Result<(R, Written), WriteRefusal> {
         if let Some(detail) = &self.collision {
             return Err(WriteRefusal::Collision(detail.clone()));
         }
         let replica = self.replica.as_mut().ok_or(WriteRefusal::NotJoined)?;
         let (result, deltas) = op(replica, now_ns).map_err(WriteRefusal::Op)?;
-        let mut out = Output { changes: replica.drain_changes(), ..Output::default() };
+        let changes = replica.drain_changes();
         if !deltas.is_empty() {
             self.unannounced_write_ns = Some(now_ns);
         }
-        for delta in deltas {
-            let message = Message::Delta { from: self.config.id, delta: Bytes::from(delta.encode()) };
-            out.send(Channel::Updates, message, Dest::All);
-        }
-        Ok((result, out))
+        Ok((result, Written { from: self.config.id, deltas, changes }))
     }
 
     // -------------------------------------------------------------------------------------------------------
