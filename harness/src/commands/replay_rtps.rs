@@ -127,6 +127,10 @@ fn spawn(
         "--join-wait-ms",
         "60000",
         "--control-stdin",
+        // A graph of this run alone (its own topic prefix): no earlier life to keep apart from, so no record left
+        // in the user's state directory.
+        "--state-dir",
+        "none",
     ]);
     if let Some(faults) = faults {
         command.args(["--faults", faults]);
@@ -225,8 +229,9 @@ pub fn replay(
     }
     let prefix = format!("replay{}", std::process::id());
     let rtps = RtpsConfig { domain_id: config.domain, topic_prefix: prefix.clone(), ..RtpsConfig::default() };
-    // A graph of this run alone (its own topic prefix): no earlier life to keep apart from, no record.
-    let bridge = start_rtps_agent(1, 300, None, rtps, None, None)?;
+    // A graph of this run alone (its own topic prefix): nobody to wait for, no earlier life to keep apart from, no
+    // record.
+    let bridge = start_rtps_agent(1, 0, None, rtps, None, None)?;
     if !bridge.wait_ready(Duration::from_secs(10)) {
         bail!("the bridge agent did not start its graph");
     }

@@ -1,0 +1,175 @@
+//! Real `cortex agent` processes for the fault tests (`agents_pause`, `agents_restart`): spawned with JSON status
+//! lines read on a channel, signalled (`SIGSTOP`, `SIGCONT`), awaited, and killed when dropped. Each agent keeps
+//! its incarnation record in a temporary state directory of its graph (its topic prefix), so restarted lives of a
+//! test see their predecessors' records and nothing lands in the user's home.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+pub fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+pub fn seed_path() -> PathBuf {
+    workspace().join("datasets/cortex-graphs/Robot_viriato.json")
+}
+
+/// Nodes of the seed graph.
+pub fn seed_nodes() -> u64 {
+    dsr::json::parse(&std::fs::read_to_string(seed_path()).unwrap()).unwrap().nodes.len() as u64
+}
+
+/// A spawned agent whose JSON status lines arrive on a channel; killed when dropped (also when a test fails).
+pub struct Agent {
+    pub id: u32,
+    pub child: Child,
+    status: mpsc::Receiver<Value>,
+    /// The latest status line read.
+    last: Option<Value>,
+}
+
+impl Drop for Agent {
+    fn drop(&mut self) {
+        // A stopped process must be resumed to die of SIGKILL promptly in every case; SIGKILL works anyway.
+        signal(&self.child, "CONT");
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The state directory of the agents of the graph with topic prefix `prefix` (see the module documentation).
+pub fn state_dir(prefix: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("cortex-test-state-{prefix}"))
+}
+
+/// Starts agent `id` on `domain` with the topic prefix `prefix`, printing its status every 100 ms.
+pub fn spawn(id: u32, domain: u16, prefix: &str, extra: &[&str]) -> Agent {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cortex"))
+        .args(["agent", "--id", &id.to_string(), "--domain", &domain.to_string(), "--topic-prefix", prefix])
+        .args(["--json-status", "--status-ms", "100", "--state-dir"])
+        .arg(state_dir(prefix))
+        .args(extra)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("cortex agent starts");
+    let stdout = child.stdout.take().unwrap();
+    let (tx, status) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Ok(value) = serde_json::from_str(&line)
+                && tx.send(value).is_err()
+            {
+                return;
+            }
+        }
+    });
+    Agent { id, child, status, last: None }
+}
+
+/// The seeded agent every test pauses: `id` 5, starting from the seed graph at once.
+pub fn spawn_seeded(domain: u16, prefix: &str) -> Agent {
+    let seed = seed_path();
+    spawn(5, domain, prefix, &["--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"])
+}
+
+/// Sends `SIGname` to the process.
+pub fn signal(child: &Child, name: &str) {
+    let _ = Command::new("kill").args([&format!("-{name}"), &child.id().to_string()]).status();
+}
+
+/// Stops the process for `pause`, then resumes it.
+pub fn pause(agent: &Agent, pause: Duration) {
+    signal(&agent.child, "STOP");
+    std::thread::sleep(pause);
+    signal(&agent.child, "CONT");
+}
+
+impl Agent {
+    /// Reads every status line waiting; returns the latest one.
+    pub fn latest(&mut self) -> Option<&Value> {
+        while let Ok(status) = self.status.try_recv() {
+            assert_eq!(status["rejected"].as_u64(), Some(0), "agent {}: {status}", self.id);
+            assert!(status["collision"].is_null(), "agent {}: {status}", self.id);
+            self.last = Some(status);
+        }
+        self.last.as_ref()
+    }
+
+    /// Waits until a status line satisfies `done` (panicking with `what` after `within`); returns that line.
+    /// `fail` is checked on every line and ends the test at once when it holds (e.g. a joiner that started alone).
+    pub fn wait_for(
+        &mut self,
+        what: &str,
+        within: Duration,
+        done: impl Fn(&Value) -> bool,
+        fail: impl Fn(&Value) -> bool,
+    ) -> Value {
+        let deadline = Instant::now() + within;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let status = match self.status.recv_timeout(left) {
+                Ok(status) => status,
+                Err(_) => panic!("agent {}: {what} not within {within:?}; last status {:?}", self.id, self.last),
+            };
+            assert_eq!(status["rejected"].as_u64(), Some(0), "agent {}: {status}", self.id);
+            assert!(!fail(&status), "agent {}: {what}: {status}", self.id);
+            self.last = Some(status.clone());
+            if done(&status) {
+                return status;
+            }
+        }
+    }
+
+    /// Waits until the agent is ready with `nodes` nodes.
+    pub fn wait_ready_with(&mut self, nodes: u64) -> Value {
+        self.wait_for(
+            &format!("ready with {nodes} nodes"),
+            Duration::from_secs(30),
+            |s| s["ready"] == true && s["nodes"].as_u64() == Some(nodes),
+            |_| false,
+        )
+    }
+
+    /// The latest count of samples received.
+    pub fn samples_received(&mut self) -> u64 {
+        self.latest().and_then(|s| s["samples_received"].as_u64()).unwrap_or(0)
+    }
+}
+
+/// A joiner that must get the graph from the running agents: it waits long for an answer, and a joiner that
+/// is ready without the expected nodes (it started alone) fails the test at once.
+pub fn join(id: u32, domain: u16, prefix: &str, extra: &[&str], nodes: u64) -> Agent {
+    let mut joiner = spawn(id, domain, prefix, &[&["--join-wait-ms", "20000"], extra].concat());
+    joiner.wait_for(
+        &format!("joined with at least {nodes} nodes (not alone)"),
+        Duration::from_secs(30),
+        |s| s["ready"] == true && s["nodes"].as_u64().is_some_and(|n| n >= nodes),
+        |s| s["ready"] == true && s["nodes"].as_u64().is_some_and(|n| n < nodes) && s["samples_received"] == 0,
+    );
+    joiner
+}
+
+/// Waits until every agent reports `nodes` nodes and one digest.
+pub fn converge(agents: &mut [&mut Agent], nodes: u64) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let statuses: Vec<Option<Value>> = agents.iter_mut().map(|a| a.latest().cloned()).collect();
+        let done = statuses
+            .iter()
+            .all(|s| s.as_ref().is_some_and(|s| s["nodes"].as_u64() == Some(nodes) && !s["digest"].is_null()))
+            && statuses.windows(2).all(|w| w[0].as_ref().map(|s| &s["digest"]) == w[1].as_ref().map(|s| &s["digest"]));
+        if done {
+            return;
+        }
+        assert!(Instant::now() < deadline, "no convergence on {nodes} nodes within 30 s: {statuses:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
