@@ -8,7 +8,7 @@ use agent::mutants::ProtocolMutant;
 use dsr::DsrMutant;
 use serde::Serialize;
 
-use crate::agents::{AgentsConfig, check_agents};
+use crate::agents::{AgentsConfig, Budgets, check_agents};
 use crate::convergence::{ConvergenceConfig, NetworkKind, check_convergence};
 use crate::report::{CheckOptions, CheckReport, CounterExample, Search};
 use crate::scheduler::{check_scheduler, scheduler_mutants};
@@ -103,37 +103,29 @@ pub fn check_scheduler_mutants(progress: bool) -> Vec<MutantResult> {
 /// kill it.
 pub fn agent_mutant_configs() -> Vec<(ProtocolMutant, AgentsConfig, &'static str)> {
     use crate::agents::properties as p;
-    let quiet = AgentsConfig {
-        agents: 2,
-        writes: 0,
-        losses: 0,
-        duplicates: 0,
-        crashes: 0,
-        cuts: 0,
-        ticks: 3,
-        ..Default::default()
-    };
+    let none = Budgets { ticks: 3, ..Budgets::default() };
+    let with = |budgets: Budgets| AgentsConfig { agents: 2, budgets, ..AgentsConfig::default() };
     ProtocolMutant::ALL
         .into_iter()
         .map(|mutant| {
             let (config, property) = match mutant {
                 // A lost delta, then a later one of the same writer.
-                ProtocolMutant::NoGapRequest => (AgentsConfig { writes: 2, losses: 1, ..quiet.clone() }, p::GAP_ASKED),
+                ProtocolMutant::NoGapRequest => (with(Budgets { writes: 2, losses: 1, ..none }), p::GAP_ASKED),
                 // A restart whose new life joins a graph that shows nothing of the first life.
                 ProtocolMutant::IncarnationForgotten => {
-                    (AgentsConfig { crashes: 1, ticks: 5, ..quiet.clone() }, p::UNIQUE_LIVES)
+                    (with(Budgets { crashes: 1, ticks: 5, ..none }), p::UNIQUE_LIVES)
                 }
                 // A write that reaches a joiner before its graph does.
-                ProtocolMutant::DropEarlyDelta => (AgentsConfig { writes: 1, ..quiet.clone() }, p::EARLY_KEPT),
+                ProtocolMutant::DropEarlyDelta => (with(Budgets { writes: 1, ..none }), p::EARLY_KEPT),
                 // A lost write and a lost quiet announce: only a periodic announce would repair them.
                 ProtocolMutant::AnnounceTimerLost => {
-                    (AgentsConfig { writes: 1, losses: 2, ticks: 4, ..quiet.clone() }, p::SETTLES)
+                    (with(Budgets { writes: 1, losses: 2, ticks: 4, ..none }), p::SETTLES)
                 }
                 // A lost graph request.
-                ProtocolMutant::JoinRequestOnce => (AgentsConfig { losses: 1, ..quiet.clone() }, p::JOINER_SERVED),
+                ProtocolMutant::JoinRequestOnce => (with(Budgets { losses: 1, ..none }), p::JOINER_SERVED),
                 // A lost answer to a missing-request.
                 ProtocolMutant::PendingAskNeverExpires => {
-                    (AgentsConfig { writes: 2, losses: 2, ticks: 4, ..quiet.clone() }, p::SETTLES)
+                    (with(Budgets { writes: 2, losses: 2, ticks: 4, ..none }), p::SETTLES)
                 }
             };
             (mutant, config.with_mutant(mutant), property)

@@ -4,7 +4,7 @@
 //! agent core) is noticed and looked at before the number is updated. The `sometimes` witnesses need larger budgets
 //! (`cortex check agents` with its defaults reaches every one).
 
-use model::agents::{AgentsConfig, check_agents};
+use model::agents::{AgentsConfig, Budgets, check_agents};
 use model::{CheckOptions, CheckReport};
 
 fn check(config: AgentsConfig) -> CheckReport {
@@ -15,22 +15,27 @@ fn check(config: AgentsConfig) -> CheckReport {
     report
 }
 
-fn quiet() -> AgentsConfig {
-    AgentsConfig { agents: 2, writes: 1, losses: 0, duplicates: 0, crashes: 0, cuts: 0, ticks: 3, ..Default::default() }
+fn config(agents: usize, budgets: Budgets) -> AgentsConfig {
+    AgentsConfig { agents, budgets, ..Default::default() }
+}
+
+/// One write, three ticks, no faults.
+fn quiet() -> Budgets {
+    Budgets { writes: 1, ticks: 3, ..Budgets::default() }
 }
 
 #[test]
 fn a_crash_a_cut_a_loss_and_a_duplicate_all_settle_to_the_specification() {
-    let config = AgentsConfig { losses: 1, duplicates: 1, crashes: 1, cuts: 1, ..quiet() };
+    let config = config(2, Budgets { losses: 1, duplicates: 1, crashes: 1, cuts: 1, ..quiet() });
     assert_eq!(check(config).unique_states, 24_662);
 }
 
 #[test]
 fn lost_writes_are_repaired() {
-    assert_eq!(check(AgentsConfig { writes: 2, losses: 1, ..quiet() }).unique_states, 6_535);
+    assert_eq!(check(config(2, Budgets { writes: 2, losses: 1, ..quiet() })).unique_states, 6_535);
 }
 
 #[test]
 fn three_agents_join_one_graph() {
-    assert_eq!(check(AgentsConfig { agents: 3, ..quiet() }).unique_states, 5_155);
+    assert_eq!(check(config(3, quiet())).unique_states, 5_155);
 }

@@ -163,12 +163,14 @@ pub fn run(args: CheckArgs) -> Result<()> {
             }
             let config = model::AgentsConfig {
                 agents: args.agents,
-                writes: args.writes,
-                losses: args.losses,
-                duplicates: args.duplicates,
-                crashes: args.crashes,
-                cuts: args.cuts,
-                ticks: args.ticks,
+                budgets: model::agents::Budgets {
+                    writes: args.writes,
+                    losses: args.losses,
+                    duplicates: args.duplicates,
+                    crashes: args.crashes,
+                    cuts: args.cuts,
+                    ticks: args.ticks,
+                },
                 ..Default::default()
             };
             if let Some(address) = args.common.explore {
