@@ -1,0 +1,362 @@
+//! The receiving thread of an [`RtpsTransport`](super::RtpsTransport): it takes samples from the current
+//! generation's readers and records discovery, and it watches `rustdds`'s own threads of the participants and
+//! rebuilds the participants, writers and readers when they have ended (see the parent module's documentation,
+//! "Recovery").
+
+use super::*;
+
+/// One of the threads `rustdds` 0.15 runs per participant ("RustDDS Participant N event loop", "RustDDS discovery
+/// thread"), known by its Linux thread id and its name as `/proc` shows it (15 bytes at most). While a participant
+/// exists, both threads must run: each ends only when the participant is dropped — or, in `rustdds` 0.15, on any
+/// error of its `poll` (see the module documentation, "Recovery").
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct EngineThread {
+    pub(super) tid: u32,
+    pub(super) name: String,
+}
+
+/// Prefix of the names of `rustdds`'s threads.
+const ENGINE_THREAD_PREFIX: &str = "RustDDS";
+
+/// Participants are created one at a time in this process, so that the `rustdds` threads that appear during a
+/// creation are that creation's (see [`EngineThread`]).
+pub(super) static CREATING_PARTICIPANTS: Mutex<()> = Mutex::new(());
+
+impl EngineThread {
+    /// The `rustdds` threads of this process now; empty where `/proc/self/task` cannot be read (not Linux).
+    pub(super) fn all() -> Vec<EngineThread> {
+        let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return Vec::new() };
+        tasks
+            .filter_map(|task| {
+                let task = task.ok()?;
+                let tid = task.file_name().to_str()?.parse().ok()?;
+                let name = std::fs::read_to_string(task.path().join("comm")).ok()?;
+                let name = name.trim_end_matches('\n');
+                name.starts_with(ENGINE_THREAD_PREFIX).then(|| EngineThread { tid, name: name.to_owned() })
+            })
+            .collect()
+    }
+
+    /// Whether the thread still runs: it is in `/proc/self/task` under its name (a thread id reused by another
+    /// thread has another name). An unreadable entry for any other reason than its absence counts as running.
+    pub(super) fn alive(&self) -> bool {
+        match std::fs::read_to_string(format!("/proc/self/task/{}/comm", self.tid)) {
+            Ok(name) => name.trim_end_matches('\n') == self.name,
+            Err(error) => error.kind() != std::io::ErrorKind::NotFound,
+        }
+    }
+}
+
+/// How often the receiving thread checks that `rustdds`'s threads still run (a few small `/proc` reads).
+const ENGINE_CHECK_PERIOD: Duration = Duration::from_millis(500);
+/// After the receiving thread's own `poll` was interrupted (EINTR: the process was stopped and resumed, or a
+/// signal arrived), `rustdds`'s threads were likely interrupted too: check them this soon.
+const ENGINE_CHECK_AFTER_EINTR: Duration = Duration::from_millis(50);
+/// Shortest time between two rebuilds, so a generation that dies at once is not rebuilt in a tight loop.
+const MIN_REBUILD_INTERVAL: Duration = Duration::from_secs(1);
+/// Longest wait before another attempt when a rebuild fails.
+const MAX_REBUILD_RETRY: Duration = Duration::from_secs(10);
+
+/// The receiving thread's view of discovery: the participant's status events, and which local writer and reader
+/// serve which channel.
+pub(super) struct DiscoveryWatch {
+    /// The status events of the transport's participants (one or two).
+    pub(super) statuses: Vec<DomainParticipantStatusListener>,
+    /// The GUID prefixes of this transport's participants: rustdds also matches a transport's writers with its own
+    /// readers (in the same participant or the other), which is no peer.
+    pub(super) own: Vec<Prefix>,
+    pub(super) endpoints: Vec<(Channel, GUID, GUID)>,
+    pub(super) state: Arc<DiscoveryState>,
+}
+
+impl DiscoveryWatch {
+    /// Records the status events waiting (a bounded number per call, so data is never starved).
+    fn drain(&self) {
+        for status in &self.statuses {
+            self.drain_one(status);
+        }
+    }
+
+    fn drain_one(&self, status: &DomainParticipantStatusListener) {
+        for _ in 0..256 {
+            let Some(event) = status.try_recv_status() else { return };
+            let now = SystemClock.now_ns();
+            let mut times = self.state.times.lock().unwrap_or_else(|p| p.into_inner());
+            match event {
+                DomainParticipantStatusEvent::ParticipantDiscovered { dpd }
+                    if !self.own.contains(&prefix_of(dpd.guid)) =>
+                {
+                    times.first_participant_ns.get_or_insert(now);
+                }
+                DomainParticipantStatusEvent::RemoteReaderMatched { local_writer, remote_reader }
+                    if !self.own.contains(&prefix_of(remote_reader)) =>
+                {
+                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, w, _)| *w == local_writer) {
+                        times.writer_matched_ns[channel.index()].get_or_insert(now);
+                        let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                        let known = &mut readers[channel.index()];
+                        if !known.contains(&remote_reader) && known.len() < MAX_REMEMBERED_READERS {
+                            known.push(remote_reader);
+                        }
+                        if *channel == Channel::Sync {
+                            self.state.sync_matches.fetch_add(1, Ordering::Release);
+                            self.state.announce_pending.store(true, Ordering::Release);
+                        }
+                    }
+                }
+                DomainParticipantStatusEvent::RemoteWriterMatched { local_reader, remote_writer }
+                    if !self.own.contains(&prefix_of(remote_writer)) =>
+                {
+                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, _, r)| *r == local_reader) {
+                        times.reader_matched_ns[channel.index()].get_or_insert(now);
+                        if *channel == Channel::Sync {
+                            self.state.sync_matches.fetch_add(1, Ordering::Release);
+                        }
+                    }
+                }
+                DomainParticipantStatusEvent::ReaderLost { guid, .. } => {
+                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                    for known in readers.iter_mut() {
+                        known.retain(|reader| *reader != guid);
+                    }
+                }
+                DomainParticipantStatusEvent::ParticipantLost { id, .. } => {
+                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                    for known in readers.iter_mut() {
+                        known.retain(|reader| reader.prefix != id);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
+/// Where the receiving thread puts samples: the sink once one is set, else the bounded inbox.
+pub(super) struct Outlet {
+    pub(super) inbox: Sender<Sample>,
+    pub(super) sink: Arc<Mutex<Option<Sink>>>,
+    pub(super) counters: Arc<Counters>,
+}
+
+impl Outlet {
+    /// Hands `sample` on; `false` when the transport is stopping or its inbox is gone.
+    fn pass(&self, mut sample: Sample, stop: &AtomicBool) -> bool {
+        {
+            // Held during the call, so that clearing the sink waits for the call to end.
+            let sink = self.sink.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some(sink) = sink.as_ref() {
+                self.counters.received(sample.bytes.len());
+                sink(sample);
+                return true;
+            }
+        }
+        // Bounded inbox: wait (back-pressure) but notice a stop request.
+        loop {
+            match self.inbox.send_timeout(sample, Duration::from_millis(50)) {
+                Ok(()) => return true,
+                Err(SendTimeoutError::Timeout(back)) => {
+                    if stop.load(Ordering::Relaxed) {
+                        return false;
+                    }
+                    sample = back;
+                }
+                Err(SendTimeoutError::Disconnected(_)) => return false,
+            }
+        }
+    }
+}
+
+/// Why [`serve`] returned.
+enum Ended {
+    /// The transport is stopping (or its inbox is gone).
+    Stopped,
+    /// The generation can no longer receive: what happened.
+    Broken(String),
+}
+
+/// The receiving thread: serves the readers of the current generation and, when `rustdds`'s threads of it have
+/// ended, rebuilds the participants, writers and readers and serves the new ones.
+pub(super) fn receive_loop(mut reading: Reading, mut rebuild: Rebuild, outlet: Outlet, stop: &AtomicBool) {
+    loop {
+        let why = match serve(&mut reading, &outlet, stop) {
+            Ended::Stopped => return,
+            Ended::Broken(why) => why,
+        };
+        outlet.counters.participant_failed();
+        tracing::error!(
+            "RTPS participant event loop died ({why}); this transport ({}) neither sends nor receives until it \
+             is rebuilt; rebuilding its participants, writers and readers",
+            reading.local
+        );
+        let Some((new, old)) = rebuild.run(stop) else { return };
+        // The old generation goes in the order its parts depend on each other: writers, readers, participants.
+        let old_reading = std::mem::replace(&mut reading, new);
+        drop(old.writers);
+        drop(old_reading);
+        drop(old.participants);
+        tracing::warn!(
+            "RTPS transport rebuilt (rebuild {}): it is now {}; peers discover it anew",
+            outlet.counters.snapshot().participant_rebuilds,
+            reading.local
+        );
+    }
+}
+
+/// Takes samples from `reading`'s readers until the transport stops or `rustdds`'s threads of this generation are
+/// found dead (checked every [`ENGINE_CHECK_PERIOD`], and soon after this thread's own `poll` was interrupted).
+fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool) -> Ended {
+    use rustdds::mio1::{Events, Interest, Poll, Token};
+    let mut poll = match Poll::new() {
+        Ok(poll) => poll,
+        Err(error) => return Ended::Broken(format!("cannot create a poller: {error}")),
+    };
+    let Reading { readers, watch, local, engine } = reading;
+    for (index, (channel, reader)) in readers.iter_mut().enumerate() {
+        if let Err(error) = poll.registry().register(reader, Token(index), Interest::READABLE) {
+            return Ended::Broken(format!("cannot register the {} reader: {error}", channel.name()));
+        }
+    }
+    for (i, status) in watch.statuses.iter_mut().enumerate() {
+        if let Err(error) =
+            poll.registry().register(status.as_status_source_mio1(), Token(readers.len() + i), Interest::READABLE)
+        {
+            // Discovery times stay unknown and joiners fall back to their retry period; data still flows.
+            tracing::warn!("rtps receive: cannot watch discovery events: {error}");
+        }
+    }
+    let mut events = Events::with_capacity(16);
+    let mut next_check = Instant::now() + ENGINE_CHECK_PERIOD;
+    while !stop.load(Ordering::Relaxed) {
+        match poll.poll(&mut events, Some(Duration::from_millis(20))) {
+            Ok(()) => {}
+            Err(error) if error.kind() == std::io::ErrorKind::Interrupted => {
+                next_check = next_check.min(Instant::now() + ENGINE_CHECK_AFTER_EINTR);
+            }
+            Err(error) => {
+                tracing::error!("rtps receive: poll failed: {error}");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+        let now = Instant::now();
+        if now >= next_check {
+            next_check = now + ENGINE_CHECK_PERIOD;
+            if let Some(dead) = engine.iter().find(|thread| !thread.alive()) {
+                return Ended::Broken(format!(
+                    "rustdds thread {:?} (tid {}) has ended; rustdds 0.15 ends it on any error of its poll, e.g. \
+                     EINTR when the process resumes after SIGSTOP",
+                    dead.name, dead.tid
+                ));
+            }
+        }
+        watch.drain();
+        // Take from every reader each round: a notification may have been drained by an earlier round.
+        for (channel, reader) in readers.iter() {
+            reader.drain_read_notifications();
+            loop {
+                match reader.try_take_one() {
+                    Ok(Some(change)) => {
+                        let origin = endpoint_of(change.writer_guid());
+                        if origin == *local {
+                            continue;
+                        }
+                        let Payload(bytes) = change.into_value();
+                        if *channel == Channel::Sync && watch.state.learn_reading_prefix(origin, &bytes) {
+                            continue;
+                        }
+                        if !outlet.pass(Sample { channel: *channel, origin, bytes }, stop) {
+                            return Ended::Stopped;
+                        }
+                    }
+                    Ok(None) => break,
+                    Err(error) => {
+                        // A sample rustdds could not decode (foreign type on our topic): logged and skipped.
+                        tracing::warn!("rtps receive on {}: dropped an undecodable sample: {error:?}", channel.name());
+                        outlet.counters.dropped_full();
+                        break;
+                    }
+                }
+            }
+        }
+    }
+    Ended::Stopped
+}
+
+/// What the receiving thread needs to rebuild the transport's DDS entities.
+pub(super) struct Rebuild {
+    pub(super) config: RtpsConfig,
+    pub(super) multicast: bool,
+    pub(super) shared: Arc<Shared>,
+    pub(super) discovery: Arc<DiscoveryState>,
+    pub(super) counters: Arc<Counters>,
+    /// When the last rebuild was done.
+    pub(super) last: Option<Instant>,
+}
+
+/// What a rebuild took out of use, for the receiving thread to drop (with the old [`Reading`]) in order.
+struct Replaced {
+    writers: Vec<Writer>,
+    participants: Participants,
+}
+
+impl Rebuild {
+    /// Builds a new generation — retrying, with a growing pause, until it succeeds or the transport stops
+    /// (`None`) — and puts its writers, identity and participants in use. Returns the new generation's reading
+    /// part and what it replaced.
+    fn run(&mut self, stop: &AtomicBool) -> Option<(Reading, Replaced)> {
+        let mut pause = self.last.map_or(Duration::ZERO, |at| MIN_REBUILD_INTERVAL.saturating_sub(at.elapsed()));
+        loop {
+            if !sleep_unless_stopped(pause, stop) {
+                return None;
+            }
+            match Generation::build(&self.config, self.multicast, &self.discovery) {
+                Ok(generation) => return Some(self.install(generation)),
+                Err(error) => {
+                    pause = (pause * 2).clamp(MIN_REBUILD_INTERVAL, MAX_REBUILD_RETRY);
+                    tracing::error!(
+                        "RTPS transport rebuild failed: {error}; still neither sending nor receiving; trying again \
+                         in {pause:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Swaps `generation`'s writers, identity and participants in. Each lock is held only for its swap (a write in
+    /// progress on an old writer finishes first; what it wrote is lost with that writer, and agents repair it).
+    fn install(&mut self, generation: Generation) -> (Reading, Replaced) {
+        let Generation { writers, best_effort, local, reading_prefix, participants, reading } = generation;
+        let mut old = Vec::new();
+        for (slot, writer) in self.shared.writers.iter().zip(writers) {
+            old.push(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
+        }
+        if let (Some((slot, _)), Some(writer)) = (&self.shared.best_effort, best_effort) {
+            old.push(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
+        }
+        *self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()) = (local, reading_prefix);
+        // The readers the old writers matched are no address for the new ones; the new matches fill the lists.
+        for known in self.discovery.readers.lock().unwrap_or_else(|p| p.into_inner()).iter_mut() {
+            known.clear();
+        }
+        let participants =
+            std::mem::replace(&mut *self.shared.participants.lock().unwrap_or_else(|p| p.into_inner()), participants);
+        self.counters.participant_rebuilt();
+        self.last = Some(Instant::now());
+        (reading, Replaced { writers: old, participants })
+    }
+}
+
+/// Sleeps for `pause` in short steps; `false` as soon as `stop` is set.
+fn sleep_unless_stopped(pause: Duration, stop: &AtomicBool) -> bool {
+    let until = Instant::now() + pause;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return false;
+        }
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return true;
+        }
+        std::thread::sleep(left.min(Duration::from_millis(50)));
+    }
+}
