@@ -17,107 +17,18 @@ use std::time::{Duration, Instant};
 
 use bytes::Bytes;
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
-use dsr::json::CortexGraph;
 use dsr::{
-    AttrKey, AttrType, Change, Delta, Digest, EdgeKey, Element, LogLimits, NewNode, NodeId, OpError, Replica,
-    ReplicaId, Value, VisibleGraph,
+    AttrKey, AttrType, Change, Delta, Digest, EdgeKey, Element, NewNode, NodeId, OpError, Replica, Value, VisibleGraph,
 };
-use transport::{Channel, Clock, Sample, Transport, TransportError, TransportStats};
+use transport::{Channel, Clock, Sample, Transport, TransportError};
+
+pub use crate::config::AgentConfig;
+pub use crate::status::{AgentStatus, AnswerTiming, JoinTimeline};
 
 use crate::AgentId;
 use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
-use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, ProtocolConfig, Send, WriteRefusal};
+use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Send, WriteRefusal};
 use crate::envelope::Message;
-use crate::mutants::Plant;
-
-/// Settings of an agent.
-#[derive(Clone, Debug)]
-pub struct AgentConfig {
-    /// This agent's id (below [`AgentId::LIMIT`]).
-    pub id: AgentId,
-    /// How long to wait for a graph from peers before starting alone.
-    pub join_wait: Duration,
-    /// How often to repeat the graph request while joining.
-    pub join_retry: Duration,
-    /// How often to announce the causal context (anti-entropy).
-    pub announce_period: Duration,
-    /// After this long without a local write, announce once more, out of period: a peer that lost this agent's
-    /// last writes (which no later delta of it reveals as a gap) asks for them then, not at the next periodic
-    /// announce. A writer faster than this never pauses that long until it stops, so it costs one announce per
-    /// burst; a slower one, one per write. Zero turns it off. Checked on the agent's tick, so it fires up to one
-    /// tick later.
-    pub quiet_announce: Duration,
-    /// History kept for anti-entropy.
-    pub log_limits: LogLimits,
-    /// Deltas kept while joining, to apply once the graph arrives (older ones are dropped past it; anti-entropy
-    /// brings them back).
-    pub max_buffered_deltas: usize,
-    /// Most bytes of deltas in one anti-entropy answer message.
-    pub max_batch_bytes: usize,
-    /// How long a graph request stays answered: a joiner's repeat within it gets no second copy, one after it does
-    /// (the first answer may have been lost). Keep [`AgentConfig::join_wait`] above this plus a join retry, or a
-    /// joiner whose answer was lost starts alone.
-    pub answer_hold: Duration,
-    /// The graph to start from if no peer answers (the first agent of a system).
-    pub seed: Option<CortexGraph>,
-    /// This life's nonce; `None` draws a random one (set it only in deterministic simulations).
-    pub nonce: Option<u64>,
-    /// The file where each life records its incarnation before it writes (`cortex agent` keeps one per agent id
-    /// and graph in its state directory): the next life reads it and takes a higher one, so lives on one host
-    /// never share a replica id even when no peer is reachable. `None`: no record (see the crate's **Identity**).
-    pub life_file: Option<std::path::PathBuf>,
-    /// The previous life's incarnation, given directly instead of read from `life_file` (simulations).
-    pub recorded_incarnation: Option<u32>,
-    /// Most remote calls of this agent waiting for replies at once.
-    pub max_calls_in_flight: usize,
-    /// Most call replies of this agent's server waiting to be published.
-    pub call_reply_outbox: usize,
-    /// A planted protocol bug (always none without the `mutants` feature).
-    pub plant: Plant,
-}
-
-impl AgentConfig {
-    /// Defaults for agent `id`: join wait 2 s (request every 200 ms), announce every 500 ms and 100 ms after the
-    /// last of a burst of writes.
-    pub fn new(id: AgentId) -> Self {
-        AgentConfig {
-            id,
-            join_wait: Duration::from_secs(2),
-            join_retry: Duration::from_millis(200),
-            announce_period: Duration::from_millis(500),
-            quiet_announce: Duration::from_millis(100),
-            log_limits: LogLimits::default(),
-            max_buffered_deltas: 65_536,
-            max_batch_bytes: 256 << 10,
-            answer_hold: Duration::from_millis(500),
-            seed: None,
-            nonce: None,
-            life_file: None,
-            recorded_incarnation: None,
-            max_calls_in_flight: 64,
-            call_reply_outbox: 256,
-            plant: Plant::NONE,
-        }
-    }
-}
-
-impl AgentConfig {
-    /// The protocol core's settings.
-    pub fn protocol(&self) -> ProtocolConfig {
-        ProtocolConfig {
-            id: self.id,
-            join_wait_ns: self.join_wait.as_nanos() as u64,
-            join_retry_ns: self.join_retry.as_nanos() as u64,
-            announce_period_ns: self.announce_period.as_nanos() as u64,
-            quiet_announce_ns: self.quiet_announce.as_nanos() as u64,
-            log_limits: self.log_limits,
-            max_buffered_deltas: self.max_buffered_deltas,
-            max_batch_bytes: self.max_batch_bytes,
-            answer_hold_ns: self.answer_hold.as_nanos() as u64,
-            plant: self.plant,
-        }
-    }
-}
 
 /// Errors of the agent API.
 #[derive(Debug, thiserror::Error)]
@@ -192,93 +103,6 @@ pub struct NodeCopy {
     pub name: String,
     /// Its attributes' winning values.
     pub attrs: BTreeMap<String, Value>,
-}
-
-/// When each step of this agent's late join happened, in nanoseconds on the agent's clock; `None` for a step not
-/// reached (yet). With the system clock, times of agents in different processes on one host compare.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct JoinTimeline {
-    /// The agent started joining (it was created).
-    pub started_ns: u64,
-    /// The first graph request was handed to the transport.
-    pub first_request_ns: Option<u64>,
-    /// The last graph request handed to the transport before the graph came.
-    pub last_request_ns: Option<u64>,
-    /// Graph requests published while joining (periodic retries, and repeats when discovery matched a peer).
-    pub requests: u32,
-    /// The graph answer reached the agent (taken from the transport's inbox).
-    pub answer_received_ns: Option<u64>,
-    /// Bytes of that answer's snapshot.
-    pub answer_bytes: usize,
-    /// The snapshot was decoded and checked.
-    pub decoded_ns: Option<u64>,
-    /// The replica was built (snapshot joined, buffered deltas applied): the agent became ready.
-    pub ready_ns: Option<u64>,
-    /// It became ready alone (no answer within the join wait) rather than from a peer's graph.
-    pub alone: bool,
-}
-
-/// The latest graph request this agent answered, in nanoseconds on the agent's clock.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct AnswerTiming {
-    /// The joiner.
-    pub to: AgentId,
-    /// The request reached the agent (taken from the transport's inbox).
-    pub request_received_ns: u64,
-    /// The encoded snapshot was ready (encoded under the state lock, or taken from the cache).
-    pub snapshot_ready_ns: u64,
-    /// Whether the snapshot came from the cache (no encoding).
-    pub from_cache: bool,
-    /// The answer's publish returned: handed to the transport, including any pacing wait.
-    pub published_ns: u64,
-    /// Bytes of the snapshot.
-    pub snapshot_bytes: usize,
-}
-
-/// What an agent can tell about itself.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AgentStatus {
-    /// The agent id.
-    pub id: AgentId,
-    /// The replica id of this life, once joined.
-    pub replica: Option<ReplicaId>,
-    /// Whether the graph has been received or started.
-    pub ready: bool,
-    /// An id collision, if one was seen.
-    pub collision: Option<String>,
-    /// Samples rejected (foreign, malformed, or refused by the replica).
-    pub rejected: u64,
-    /// Change signals dropped because a subscriber's channel was full.
-    pub signals_dropped: u64,
-    /// Publishes that failed (the local state is kept; anti-entropy repairs).
-    pub publish_failures: u64,
-    /// Times a peer had joined the same operations but showed another graph digest (a replica bug; repaired with
-    /// snapshots). Zero in a correct system.
-    pub digest_mismatches: u64,
-    /// Missing-delta requests sent at once because a received delta showed a gap: operations of its writer before
-    /// it had not been joined (a lost sample, or one overtaken in flight). Anti-entropy would find the gap at the
-    /// next announce; this asks sooner.
-    pub gap_requests: u64,
-    /// Call requests addressed to this agent (served, or answered with a fault).
-    pub calls_served: u64,
-    /// Call replies of this agent's server dropped because the reply outbox was full.
-    pub call_replies_dropped: u64,
-    /// Replies to this agent's calls that came after the caller gave up (or from another agent).
-    pub late_call_replies: u64,
-    /// This agent's calls waiting for replies now.
-    pub calls_in_flight: usize,
-    /// Peers heard from, by agent id.
-    pub peers: Vec<AgentId>,
-    /// Visible nodes.
-    pub nodes: usize,
-    /// Visible edges.
-    pub edges: usize,
-    /// The transport's counters.
-    pub transport: TransportStats,
-    /// How this life's late join went.
-    pub join: JoinTimeline,
-    /// The latest graph request this agent answered, if any.
-    pub last_answer: Option<AnswerTiming>,
 }
 
 /// What the lock guards: the protocol core and what the shell measures about it.

@@ -50,10 +50,12 @@ use std::fmt;
 
 pub mod agent;
 pub mod calls;
+pub mod config;
 pub mod core;
 pub mod envelope;
 pub mod life;
 pub mod mutants;
+pub mod status;
 
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline};
 pub use calls::{CallError, CallFault, CallReplier, CallServer, PendingCall};

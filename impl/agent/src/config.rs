@@ -1,0 +1,97 @@
+//! [`AgentConfig`]: the settings of an agent, and the protocol core's settings they give.
+
+use std::time::Duration;
+
+use dsr::LogLimits;
+use dsr::json::CortexGraph;
+
+use crate::AgentId;
+use crate::core::ProtocolConfig;
+use crate::mutants::Plant;
+
+/// Settings of an agent.
+#[derive(Clone, Debug)]
+pub struct AgentConfig {
+    /// This agent's id (below [`AgentId::LIMIT`]).
+    pub id: AgentId,
+    /// How long to wait for a graph from peers before starting alone.
+    pub join_wait: Duration,
+    /// How often to repeat the graph request while joining.
+    pub join_retry: Duration,
+    /// How often to announce the causal context (anti-entropy).
+    pub announce_period: Duration,
+    /// After this long without a local write, announce once more, out of period: a peer that lost this agent's
+    /// last writes (which no later delta of it reveals as a gap) asks for them then, not at the next periodic
+    /// announce. A writer faster than this never pauses that long until it stops, so it costs one announce per
+    /// burst; a slower one, one per write. Zero turns it off. Checked on the agent's tick, so it fires up to one
+    /// tick later.
+    pub quiet_announce: Duration,
+    /// History kept for anti-entropy.
+    pub log_limits: LogLimits,
+    /// Deltas kept while joining, to apply once the graph arrives (older ones are dropped past it; anti-entropy
+    /// brings them back).
+    pub max_buffered_deltas: usize,
+    /// Most bytes of deltas in one anti-entropy answer message.
+    pub max_batch_bytes: usize,
+    /// How long a graph request stays answered: a joiner's repeat within it gets no second copy, one after it does
+    /// (the first answer may have been lost). Keep [`AgentConfig::join_wait`] above this plus a join retry, or a
+    /// joiner whose answer was lost starts alone.
+    pub answer_hold: Duration,
+    /// The graph to start from if no peer answers (the first agent of a system).
+    pub seed: Option<CortexGraph>,
+    /// This life's nonce; `None` draws a random one (set it only in deterministic simulations).
+    pub nonce: Option<u64>,
+    /// The file where each life records its incarnation before it writes (`cortex agent` keeps one per agent id
+    /// and graph in its state directory): the next life reads it and takes a higher one, so lives on one host
+    /// never share a replica id even when no peer is reachable. `None`: no record (see the crate's **Identity**).
+    pub life_file: Option<std::path::PathBuf>,
+    /// The previous life's incarnation, given directly instead of read from `life_file` (simulations).
+    pub recorded_incarnation: Option<u32>,
+    /// Most remote calls of this agent waiting for replies at once.
+    pub max_calls_in_flight: usize,
+    /// Most call replies of this agent's server waiting to be published.
+    pub call_reply_outbox: usize,
+    /// A planted protocol bug (always none without the `mutants` feature).
+    pub plant: Plant,
+}
+
+impl AgentConfig {
+    /// Defaults for agent `id`: join wait 2 s (request every 200 ms), announce every 500 ms and 100 ms after the
+    /// last of a burst of writes.
+    pub fn new(id: AgentId) -> Self {
+        AgentConfig {
+            id,
+            join_wait: Duration::from_secs(2),
+            join_retry: Duration::from_millis(200),
+            announce_period: Duration::from_millis(500),
+            quiet_announce: Duration::from_millis(100),
+            log_limits: LogLimits::default(),
+            max_buffered_deltas: 65_536,
+            max_batch_bytes: 256 << 10,
+            answer_hold: Duration::from_millis(500),
+            seed: None,
+            nonce: None,
+            life_file: None,
+            recorded_incarnation: None,
+            max_calls_in_flight: 64,
+            call_reply_outbox: 256,
+            plant: Plant::NONE,
+        }
+    }
+
+    /// The protocol core's settings.
+    pub fn protocol(&self) -> ProtocolConfig {
+        ProtocolConfig {
+            id: self.id,
+            join_wait_ns: self.join_wait.as_nanos() as u64,
+            join_retry_ns: self.join_retry.as_nanos() as u64,
+            announce_period_ns: self.announce_period.as_nanos() as u64,
+            quiet_announce_ns: self.quiet_announce.as_nanos() as u64,
+            log_limits: self.log_limits,
+            max_buffered_deltas: self.max_buffered_deltas,
+            max_batch_bytes: self.max_batch_bytes,
+            answer_hold_ns: self.answer_hold.as_nanos() as u64,
+            plant: self.plant,
+        }
+    }
+}

@@ -1,0 +1,94 @@
+//! What an agent tells about itself: [`AgentStatus`], with the timelines of its late join ([`JoinTimeline`]) and
+//! of the latest graph request it answered ([`AnswerTiming`]).
+
+use dsr::ReplicaId;
+use transport::TransportStats;
+
+use crate::AgentId;
+
+/// When each step of this agent's late join happened, in nanoseconds on the agent's clock; `None` for a step not
+/// reached (yet). With the system clock, times of agents in different processes on one host compare.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct JoinTimeline {
+    /// The agent started joining (it was created).
+    pub started_ns: u64,
+    /// The first graph request was handed to the transport.
+    pub first_request_ns: Option<u64>,
+    /// The last graph request handed to the transport before the graph came.
+    pub last_request_ns: Option<u64>,
+    /// Graph requests published while joining (periodic retries, and repeats when discovery matched a peer).
+    pub requests: u32,
+    /// The graph answer reached the agent (taken from the transport's inbox).
+    pub answer_received_ns: Option<u64>,
+    /// Bytes of that answer's snapshot.
+    pub answer_bytes: usize,
+    /// The snapshot was decoded and checked.
+    pub decoded_ns: Option<u64>,
+    /// The replica was built (snapshot joined, buffered deltas applied): the agent became ready.
+    pub ready_ns: Option<u64>,
+    /// It became ready alone (no answer within the join wait) rather than from a peer's graph.
+    pub alone: bool,
+}
+
+/// The latest graph request this agent answered, in nanoseconds on the agent's clock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AnswerTiming {
+    /// The joiner.
+    pub to: AgentId,
+    /// The request reached the agent (taken from the transport's inbox).
+    pub request_received_ns: u64,
+    /// The encoded snapshot was ready (encoded under the state lock, or taken from the cache).
+    pub snapshot_ready_ns: u64,
+    /// Whether the snapshot came from the cache (no encoding).
+    pub from_cache: bool,
+    /// The answer's publish returned: handed to the transport, including any pacing wait.
+    pub published_ns: u64,
+    /// Bytes of the snapshot.
+    pub snapshot_bytes: usize,
+}
+
+/// What an agent can tell about itself.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AgentStatus {
+    /// The agent id.
+    pub id: AgentId,
+    /// The replica id of this life, once joined.
+    pub replica: Option<ReplicaId>,
+    /// Whether the graph has been received or started.
+    pub ready: bool,
+    /// An id collision, if one was seen.
+    pub collision: Option<String>,
+    /// Samples rejected (foreign, malformed, or refused by the replica).
+    pub rejected: u64,
+    /// Change signals dropped because a subscriber's channel was full.
+    pub signals_dropped: u64,
+    /// Publishes that failed (the local state is kept; anti-entropy repairs).
+    pub publish_failures: u64,
+    /// Times a peer had joined the same operations but showed another graph digest (a replica bug; repaired with
+    /// snapshots). Zero in a correct system.
+    pub digest_mismatches: u64,
+    /// Missing-delta requests sent at once because a received delta showed a gap: operations of its writer before
+    /// it had not been joined (a lost sample, or one overtaken in flight). Anti-entropy would find the gap at the
+    /// next announce; this asks sooner.
+    pub gap_requests: u64,
+    /// Call requests addressed to this agent (served, or answered with a fault).
+    pub calls_served: u64,
+    /// Call replies of this agent's server dropped because the reply outbox was full.
+    pub call_replies_dropped: u64,
+    /// Replies to this agent's calls that came after the caller gave up (or from another agent).
+    pub late_call_replies: u64,
+    /// This agent's calls waiting for replies now.
+    pub calls_in_flight: usize,
+    /// Peers heard from, by agent id.
+    pub peers: Vec<AgentId>,
+    /// Visible nodes.
+    pub nodes: usize,
+    /// Visible edges.
+    pub edges: usize,
+    /// The transport's counters.
+    pub transport: TransportStats,
+    /// How this life's late join went.
+    pub join: JoinTimeline,
+    /// The latest graph request this agent answered, if any.
+    pub last_answer: Option<AnswerTiming>,
+}
