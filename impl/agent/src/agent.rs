@@ -167,16 +167,6 @@ impl<T: Transport + 'static> Agent<T> {
         if config.id.0 >= AgentId::LIMIT {
             return Err(AgentError::InvalidId(config.id.0));
         }
-        if !config.join_wait.is_zero() && config.join_wait <= config.answer_hold + config.join_retry {
-            tracing::warn!(
-                "{}: join wait {:?} is not above the answer hold {:?} plus a retry {:?}: if a graph answer is lost, \
-                 this agent starts alone before a peer answers again",
-                config.id,
-                config.join_wait,
-                config.answer_hold,
-                config.join_retry
-            );
-        }
         let now = clock.now_ns();
         let nonce = config.nonce.unwrap_or_else(random_nonce);
         let seed = config.seed.take();
@@ -689,8 +679,18 @@ impl<T: Transport> Inner<T> {
                             path.display()
                         );
                     }
-                    if *alone {
+                    let heard = locked.core.peers();
+                    if *alone && heard.is_empty() {
                         tracing::info!("{me}: no peer answered within {:?}; started alone", self.config.join_wait);
+                    } else if *alone {
+                        // Peers were there, yet no graph came: a split brain until anti-entropy merges the graphs.
+                        tracing::warn!(
+                            "{me}: started alone after {:?} although it heard {heard:?}: no graph answer came (a \
+                             peer answers a repeated request only {:?} after the last; a join wait above that plus \
+                             a retry lets it)",
+                            self.config.join_wait,
+                            self.config.answer_hold
+                        );
                     }
                     if let Some(nodes) = seed_nodes {
                         tracing::info!("{me}: started from the seed graph ({nodes} nodes)");

@@ -35,7 +35,7 @@ pub struct AgentConfig {
     pub max_batch_bytes: usize,
     /// How long a graph request stays answered: a joiner's repeat within it gets no second copy, one after it does
     /// (the first answer may have been lost). Keep [`AgentConfig::join_wait`] above this plus a join retry, or a
-    /// joiner whose answer was lost starts alone.
+    /// joiner whose answer was lost starts alone (and says so with a warning).
     pub answer_hold: Duration,
     /// The graph to start from if no peer answers (the first agent of a system).
     pub seed: Option<CortexGraph>,

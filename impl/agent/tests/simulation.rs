@@ -32,6 +32,8 @@ fn config(id: u32, nonce: u64) -> AgentConfig {
     AgentConfig {
         join_wait: Duration::from_millis(300),
         join_retry: Duration::from_millis(20),
+        // Below the join wait less a retry, as the defaults are: a lost graph answer is sent again in time.
+        answer_hold: Duration::from_millis(100),
         announce_period: Duration::from_millis(40),
         nonce: Some(nonce),
         ..AgentConfig::new(AgentId(id))
