@@ -35,6 +35,8 @@ fn spawn(
     let dump = dir.join(format!("dump{id}.json"));
     let mut child = Command::new(env!("CARGO_BIN_EXE_cortex"))
         .args(["agent", "--id", &id.to_string(), "--domain", "0", "--topic-prefix", prefix, "--json-status"])
+        // A graph of this test alone: no incarnation record left in the home directory.
+        .args(["--state-dir", "none"])
         .args(["--status-ms", "100", "--dump-json"])
         .arg(&dump)
         .args(extra)

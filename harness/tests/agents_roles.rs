@@ -31,6 +31,8 @@ impl Drop for Proc {
 fn spawn(id: u32, prefix: &str, extra: &[&str], tx: mpsc::Sender<(u32, serde_json::Value)>) -> Proc {
     let mut child = Command::new(env!("CARGO_BIN_EXE_cortex"))
         .args(["agent", "--id", &id.to_string(), "--domain", "0", "--topic-prefix", prefix, "--json-status"])
+        // A graph of this test alone: no incarnation record left in the home directory.
+        .args(["--state-dir", "none"])
         .args(["--status-ms", "100"])
         .args(extra)
         .stdin(Stdio::null())
