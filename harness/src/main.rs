@@ -38,6 +38,11 @@ enum Command {
     Inspect(commands::inspect::InspectArgs),
     /// Run an experiment set and write a report (results.json, figures, report.md).
     Report(commands::report::ReportArgs),
+    /// A Jepsen-style fault campaign on agent processes in network namespaces (needs root).
+    Chaos(commands::chaos::ChaosArgs),
+    /// An agent process of a chaos campaign (started by `cortex chaos`).
+    #[command(hide = true)]
+    ChaosAgent(commands::chaos::serve::ChaosAgentArgs),
     /// A receiver process of a measured run (started by `cortex report`).
     #[command(hide = true)]
     MeasureReceiver(commands::receiver::ReceiverArgs),
@@ -72,6 +77,12 @@ fn main() -> ExitCode {
         Command::Inspect(args) => commands::inspect::run(args),
         Command::Report(args) => commands::report::run(args),
         Command::MeasureReceiver(args) => commands::receiver::run(args),
+        Command::ChaosAgent(args) => commands::chaos::serve::run(args),
+        Command::Chaos(args) => match commands::chaos::run(args) {
+            Ok(true) => Ok(()),
+            Ok(false) => return ExitCode::from(commands::chaos::EXIT_VIOLATION),
+            Err(error) => Err(error),
+        },
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,6 +4,7 @@
 
 pub mod agent;
 pub mod bench;
+pub mod chaos;
 pub mod check;
 pub mod datasets;
 pub mod graph;

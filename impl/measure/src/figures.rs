@@ -13,7 +13,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 /// Name under which the embedded font is registered.
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 /// Pixel size of every figure.
 pub const SIZE: (u32, u32) = (900, 560);
 
@@ -63,7 +63,7 @@ pub struct Panel {
 /// Height in pixels of one panel of [`render_panels`].
 pub const PANEL_HEIGHT: u32 = 300;
 
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The embedded font is valid TrueType; if registration failed, text would be missing, not wrong.
@@ -110,7 +110,7 @@ fn axis(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
     (if log { lo - pad } else { lo }, hi + pad)
 }
 
-const COLOURS: [RGBColor; 8] = [
+pub(crate) const COLOURS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -133,12 +133,12 @@ where
     Ok(())
 }
 
-fn footer_height(lines: &[String]) -> u32 {
+pub(crate) fn footer_height(lines: &[String]) -> u32 {
     16 * lines.len() as u32 + 8
 }
 
 /// Writes the footer lines at the bottom of `root` and returns the area above them.
-fn draw_footer<DB: DrawingBackend>(
+pub(crate) fn draw_footer<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     lines: &[String],
 ) -> Result<DrawingArea<DB, Shift>, DrawingAreaErrorKind<DB::ErrorType>> {

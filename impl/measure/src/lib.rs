@@ -36,6 +36,7 @@
 pub mod clock;
 pub mod experiment;
 pub mod figures;
+pub mod lanes;
 pub mod latency;
 pub mod netns;
 pub mod partition;

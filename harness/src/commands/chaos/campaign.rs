@@ -1,0 +1,694 @@
+//! One campaign: start the agents in their namespaces, run the schedule's episodes (writers on, one fault, heal,
+//! writers off, wait until every running agent shows the same graph), collect the final states and the whole
+//! history of writes, and check them ([`super::check`]).
+//!
+//! Writes are issued by the campaign, one outstanding per agent, at `write_hz` per agent, each with a draw from the
+//! campaign's seeded generator; the agent chooses the operation from the draw and its own graph and answers with
+//! the record. So the schedule is a function of the seed, while which agent makes which write depends on timing. An
+//! agent is killed only when it has no write outstanding, so every operation that exists is in the history.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use transport::rng::SplitMix64;
+
+use super::net::{Filter, Network};
+use super::procs::{Launch, Line, Proc, log_tail};
+use super::protocol::{Command, FinalState, Report, StatusLine, WriteRecord, parse_report};
+use super::schedule::{Episode, Fault, Schedule};
+
+/// A campaign's settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CampaignConfig {
+    /// The seed of the schedule and of the writers' draws.
+    pub seed: u64,
+    /// Agent slots (the last joins late).
+    pub agents: usize,
+    /// Rounds of episodes (one of each fault kind per round).
+    pub rounds: usize,
+    /// How long each fault is on, in milliseconds.
+    pub fault_ms: u64,
+    /// Writes per second per agent while the writers run.
+    pub write_hz: f64,
+    /// Bytes of a camera frame.
+    pub image_bytes: usize,
+    /// How long to wait for convergence after a heal before the campaign fails, in milliseconds.
+    pub settle_ms: u64,
+    /// How long a new life waits for a running agent's graph, in milliseconds.
+    pub join_wait_ms: u64,
+    /// DDS domain.
+    pub domain: u16,
+}
+
+/// One line of `history.jsonl`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum Event {
+    /// The campaign's settings and schedule (the first line).
+    Campaign {
+        /// The settings.
+        config: CampaignConfig,
+        /// The schedule.
+        schedule: Schedule,
+    },
+    /// An agent process started.
+    Started {
+        /// Milliseconds since the campaign started.
+        t_ms: f64,
+        /// The slot.
+        slot: usize,
+        /// The life.
+        life: u32,
+    },
+    /// An agent life got its graph (joined or started alone).
+    Ready {
+        /// Milliseconds since the campaign started.
+        t_ms: f64,
+        /// The slot.
+        slot: usize,
+        /// The life.
+        life: u32,
+        /// Its replica id.
+        replica: u32,
+    },
+    /// A signal sent to an agent process (`STOP`, `CONT`, `KILL`).
+    Signal {
+        /// Milliseconds since the campaign started.
+        t_ms: f64,
+        /// The slot.
+        slot: usize,
+        /// The signal.
+        signal: String,
+    },
+    /// An episode's fault started.
+    Fault {
+        /// Milliseconds since the campaign started.
+        t_ms: f64,
+        /// The episode's index.
+        episode: usize,
+        /// The fault.
+        fault: Fault,
+    },
+    /// An episode's fault healed; the writers stop.
+    Heal {
+        /// Milliseconds since the campaign started.
+        t_ms: f64,
+        /// The episode's index.
+        episode: usize,
+    },
+    /// Every running agent showed the same graph (or the settle time ran out: `heal_to_converge_ms` is `None`).
+    Converged {
+        /// Milliseconds since the campaign started.
+        t_ms: f64,
+        /// The episode's index.
+        episode: usize,
+        /// Milliseconds from the heal to the first status round in which all digests were equal.
+        heal_to_converge_ms: Option<f64>,
+    },
+    /// A write.
+    Write(WriteRecord),
+    /// A write an agent could not make.
+    Skipped {
+        /// Milliseconds since the campaign started.
+        t_ms: f64,
+        /// The slot.
+        slot: usize,
+        /// The write's number.
+        seq: u64,
+        /// Why.
+        reason: String,
+    },
+    /// An agent's final state.
+    Final {
+        /// The slot.
+        slot: usize,
+        /// Its life.
+        life: u32,
+        /// The state.
+        state: FinalState,
+    },
+}
+
+/// What an agent slot shows at a moment, for the timeline figure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Shown {
+    /// No process.
+    Down,
+    /// Stopped by `SIGSTOP`.
+    Paused,
+    /// Running, no graph yet.
+    Joining,
+    /// Its digest is the one more than half of the agents with a graph show.
+    Agrees,
+    /// Its digest differs from that majority's, or there is no majority.
+    Differs,
+}
+
+/// A stretch of time in which a slot showed one thing.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Segment {
+    /// Start, milliseconds since the campaign started.
+    pub from_ms: f64,
+    /// End.
+    pub to_ms: f64,
+    /// What it showed.
+    pub shown: Shown,
+}
+
+/// One episode's outcome.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeResult {
+    /// The fault's kind.
+    pub kind: String,
+    /// The fault.
+    pub description: String,
+    /// When the fault started, milliseconds since the campaign started.
+    pub start_ms: f64,
+    /// When it healed.
+    pub heal_ms: f64,
+    /// Milliseconds from the heal until every running agent showed the same graph (`None`: not within the settle
+    /// time).
+    pub heal_to_converge_ms: Option<f64>,
+}
+
+/// What a campaign recorded.
+#[derive(Debug)]
+pub struct Recorded {
+    /// Every write, in the order the campaign received them.
+    pub writes: Vec<WriteRecord>,
+    /// Replica ids of lives that were killed.
+    pub killed_replicas: Vec<u32>,
+    /// Final states of the agents running at the end.
+    pub finals: Vec<(usize, FinalState)>,
+    /// The episodes.
+    pub episodes: Vec<EpisodeResult>,
+    /// Per slot, what it showed over time.
+    pub timeline: Vec<Vec<Segment>>,
+    /// Writes skipped by the agents.
+    pub skipped: u64,
+    /// Problems seen while running (a process that died by itself, a final state missing).
+    pub problems: Vec<String>,
+    /// Milliseconds the campaign ran.
+    pub duration_ms: f64,
+}
+
+#[derive(Debug, Default)]
+struct Slot {
+    proc: Option<Proc>,
+    lives: u32,
+    paused: bool,
+    draining: bool,
+    outstanding: Option<u64>,
+    next_write: Option<Instant>,
+    status: Option<(Instant, StatusLine)>,
+    replica: Option<u32>,
+    segments: Vec<Segment>,
+    final_state: Option<FinalState>,
+}
+
+/// A campaign in progress.
+pub struct Campaign {
+    config: CampaignConfig,
+    launch: Launch,
+    network: Network,
+    slots: Vec<Slot>,
+    lines_tx: Sender<Line>,
+    lines: Receiver<Line>,
+    started: Instant,
+    rng: SplitMix64,
+    seq: u64,
+    writing: bool,
+    history: std::io::BufWriter<std::fs::File>,
+    writes: Vec<WriteRecord>,
+    killed_replicas: Vec<u32>,
+    skipped: u64,
+    problems: Vec<String>,
+    next_sample: Instant,
+    interrupted: Arc<AtomicBool>,
+}
+
+/// Period of the timeline's samples.
+const SAMPLE: Duration = Duration::from_millis(50);
+/// How long the loop sleeps when nothing arrives.
+const IDLE: Duration = Duration::from_millis(2);
+
+impl Campaign {
+    /// Builds the network and opens `dir/history.jsonl`; no agent runs yet.
+    ///
+    /// # Errors
+    /// The network cannot be built or the directory written.
+    pub fn new(
+        config: CampaignConfig,
+        program: PathBuf,
+        dir: PathBuf,
+        tag: &str,
+        interrupted: Arc<AtomicBool>,
+    ) -> Result<Campaign> {
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let _ = std::fs::remove_dir_all(dir.join("agents"));
+        let network = Network::create(tag, config.agents)?;
+        let history_path = dir.join("history.jsonl");
+        let history = std::io::BufWriter::new(
+            std::fs::File::create(&history_path).with_context(|| format!("creating {}", history_path.display()))?,
+        );
+        let launch = Launch {
+            program,
+            domain: config.domain,
+            join_wait_ms: config.join_wait_ms,
+            status_ms: 100,
+            image_bytes: config.image_bytes,
+            dir,
+        };
+        let (lines_tx, lines) = channel();
+        let slots = (0..config.agents).map(|_| Slot::default()).collect();
+        Ok(Campaign {
+            rng: SplitMix64::new(config.seed),
+            config,
+            launch,
+            network,
+            slots,
+            lines_tx,
+            lines,
+            started: Instant::now(),
+            seq: 0,
+            writing: false,
+            history,
+            writes: Vec::new(),
+            killed_replicas: Vec::new(),
+            skipped: 0,
+            problems: Vec::new(),
+            next_sample: Instant::now(),
+            interrupted,
+        })
+    }
+
+    fn ms(&self, at: Instant) -> f64 {
+        at.saturating_duration_since(self.started).as_secs_f64() * 1e3
+    }
+
+    fn now_ms(&self) -> f64 {
+        self.ms(Instant::now())
+    }
+
+    fn log(&mut self, event: &Event) -> Result<()> {
+        let line = serde_json::to_string(event)?;
+        writeln!(self.history, "{line}").context("writing history.jsonl")
+    }
+
+    /// Runs `schedule` to the end and returns what was recorded.
+    ///
+    /// # Errors
+    /// The network or a process failed, or the campaign was interrupted (Ctrl-C).
+    pub fn run(mut self, schedule: &Schedule) -> Result<Recorded> {
+        self.started = Instant::now();
+        self.log(&Event::Campaign { config: self.config.clone(), schedule: schedule.clone() })?;
+        for slot in 0..schedule.agents - 1 {
+            self.start(slot)?;
+        }
+        // Warm-up: the first agents get their graphs (the first starts alone), then write for a while, so that
+        // the faults hit a populated graph.
+        self.wait_until(|c| c.running().all(|s| c.ready(s)), Duration::from_millis(self.config.settle_ms))?;
+        self.writing = true;
+        self.pump_for(Duration::from_millis(self.config.fault_ms))?;
+        self.writing = false;
+        let heal = Instant::now();
+        self.converge(heal)?;
+        let mut episodes = Vec::new();
+        for (index, episode) in schedule.episodes.iter().enumerate() {
+            episodes.push(self.episode(index, episode)?);
+            self.history.flush()?;
+        }
+        self.finish(episodes)
+    }
+
+    fn running(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.slots.len()).filter(|s| self.slots[*s].proc.is_some())
+    }
+
+    fn ready(&self, slot: usize) -> bool {
+        self.slots[slot].status.as_ref().is_some_and(|(_, s)| s.ready)
+    }
+
+    fn start(&mut self, slot: usize) -> Result<()> {
+        let life = self.slots[slot].lives;
+        let proc = Proc::start(&self.launch, &self.network.namespace(slot), slot, life, self.lines_tx.clone())?;
+        let s = &mut self.slots[slot];
+        s.lives += 1;
+        s.proc = Some(proc);
+        s.status = None;
+        s.replica = None;
+        s.outstanding = None;
+        s.draining = false;
+        s.paused = false;
+        s.next_write = None;
+        let t_ms = self.now_ms();
+        self.log(&Event::Started { t_ms, slot, life })
+    }
+
+    fn signal(&mut self, slot: usize, signal: &str) -> Result<()> {
+        let t_ms = self.now_ms();
+        self.log(&Event::Signal { t_ms, slot, signal: signal.to_owned() })?;
+        let s = &mut self.slots[slot];
+        match signal {
+            "KILL" => {
+                if let Some(replica) = s.replica {
+                    self.killed_replicas.push(replica);
+                }
+                if let Some(proc) = s.proc.take() {
+                    proc.kill();
+                }
+                s.status = None;
+                s.outstanding = None;
+            }
+            _ => {
+                if let Some(proc) = &s.proc {
+                    proc.signal(signal)?;
+                }
+                s.paused = signal == "STOP";
+            }
+        }
+        Ok(())
+    }
+
+    fn set_filters(&mut self, filters: &BTreeMap<usize, Filter>) -> Result<()> {
+        for slot in 0..self.slots.len() {
+            self.network.set_filter(slot, filters.get(&slot).unwrap_or(&Filter::default()))?;
+        }
+        Ok(())
+    }
+
+    fn episode(&mut self, index: usize, episode: &Episode) -> Result<EpisodeResult> {
+        let start = Instant::now();
+        let t_ms = self.ms(start);
+        self.log(&Event::Fault { t_ms, episode: index, fault: episode.fault.clone() })?;
+        self.writing = true;
+        let fault_for = Duration::from_millis(episode.fault_ms);
+        match &episode.fault {
+            Fault::Pause { agent } => self.signal(*agent, "STOP")?,
+            Fault::Kill { agent, down_ms, isolated } => {
+                if *isolated {
+                    self.set_filters(&[(*agent, Filter { isolated: true, ..Filter::default() })].into())?;
+                }
+                self.drain(*agent)?;
+                self.signal(*agent, "KILL")?;
+                self.pump_for(Duration::from_millis(*down_ms))?;
+                self.start(*agent)?;
+                // Heal only once the new life has its graph and has written for a while (alone, if isolated).
+                let agent = *agent;
+                self.wait_until(|c| c.ready(agent), Duration::from_millis(self.config.settle_ms))?;
+                self.pump_for(fault_for / 3)?;
+            }
+            Fault::LateJoin { agent } => self.start(*agent)?,
+            other => self.set_filters(&filters_of(other, self.slots.len()))?,
+        }
+        let until = start + fault_for;
+        self.pump_for(until.saturating_duration_since(Instant::now()))?;
+        // Heal.
+        match &episode.fault {
+            Fault::Pause { agent } => self.signal(*agent, "CONT")?,
+            Fault::LateJoin { .. } => {}
+            _ => self.set_filters(&BTreeMap::new())?,
+        }
+        self.writing = false;
+        let heal = Instant::now();
+        let heal_ms = self.ms(heal);
+        self.log(&Event::Heal { t_ms: heal_ms, episode: index })?;
+        let converged = self.converge(heal)?;
+        let t_ms = self.now_ms();
+        let heal_to_converge_ms = converged.map(|d| d.as_secs_f64() * 1e3);
+        self.log(&Event::Converged { t_ms, episode: index, heal_to_converge_ms })?;
+        Ok(EpisodeResult {
+            kind: episode.fault.kind().to_owned(),
+            description: episode.fault.describe(),
+            start_ms: self.ms(start),
+            heal_ms,
+            heal_to_converge_ms,
+        })
+    }
+
+    /// Stops new writes to `slot` and waits for its outstanding one.
+    fn drain(&mut self, slot: usize) -> Result<()> {
+        self.slots[slot].draining = true;
+        self.wait_until(|c| c.slots[slot].outstanding.is_none(), Duration::from_secs(10))?;
+        self.slots[slot].draining = false;
+        Ok(())
+    }
+
+    /// Waits until every running agent has, after `since`, reported a graph with the same digest, and no write is
+    /// outstanding; the time from `since`, or `None` after the settle time.
+    fn converge(&mut self, since: Instant) -> Result<Option<Duration>> {
+        let settle = Duration::from_millis(self.config.settle_ms);
+        let agreed = self.wait_until(|c| c.agreed_since(since), settle)?;
+        Ok(agreed.then(|| since.elapsed()))
+    }
+
+    fn agreed_since(&self, since: Instant) -> bool {
+        let mut digest = None;
+        for slot in self.running() {
+            let s = &self.slots[slot];
+            let Some((at, status)) = &s.status else { return false };
+            if *at < since || !status.ready || s.outstanding.is_some() || status.digest.is_none() {
+                return false;
+            }
+            if digest.is_some_and(|d| d != &status.digest) {
+                return false;
+            }
+            digest = Some(&status.digest);
+        }
+        digest.is_some()
+    }
+
+    /// Pumps until `done` holds (true) or `timeout` passes (false).
+    fn wait_until(&mut self, done: impl Fn(&Campaign) -> bool, timeout: Duration) -> Result<bool> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if done(self) {
+                return Ok(true);
+            }
+            if Instant::now() >= deadline {
+                return Ok(false);
+            }
+            self.pump_once()?;
+        }
+    }
+
+    fn pump_for(&mut self, duration: Duration) -> Result<()> {
+        let until = Instant::now() + duration;
+        while Instant::now() < until {
+            self.pump_once()?;
+        }
+        Ok(())
+    }
+
+    /// Handles what arrived, issues due writes, samples the timeline.
+    fn pump_once(&mut self) -> Result<()> {
+        if self.interrupted.load(Ordering::SeqCst) {
+            bail!("interrupted");
+        }
+        if let Ok(line) = self.lines.recv_timeout(IDLE) {
+            self.handle(line)?;
+        }
+        while let Ok(line) = self.lines.try_recv() {
+            self.handle(line)?;
+        }
+        if self.writing {
+            self.issue_writes();
+        }
+        if Instant::now() >= self.next_sample {
+            self.next_sample = Instant::now() + SAMPLE;
+            self.sample();
+        }
+        Ok(())
+    }
+
+    fn handle(&mut self, line: Line) -> Result<()> {
+        let slot = line.slot;
+        // Lines of an earlier life (still buffered when it was killed) are ignored.
+        if self.slots[slot].proc.as_ref().is_none_or(|p| p.life != line.life) {
+            return Ok(());
+        }
+        let t_ms = self.ms(line.at);
+        let Some(text) = line.text else {
+            let tail = log_tail(&self.launch.dir, slot);
+            self.problems.push(format!("agent {slot} (life {}) exited by itself at {t_ms:.0} ms: {tail}", line.life));
+            self.slots[slot].proc = None;
+            return Ok(());
+        };
+        match parse_report(&text) {
+            Ok(Report::Status(status)) => {
+                let s = &mut self.slots[slot];
+                if status.ready && s.replica.is_none() {
+                    s.replica = status.replica;
+                    let replica = status.replica.unwrap_or(0);
+                    self.log(&Event::Ready { t_ms, slot, life: line.life, replica })?;
+                }
+                self.slots[slot].status = Some((line.at, status));
+            }
+            Ok(Report::Wrote(mut record)) => {
+                record.at_ms = t_ms;
+                self.slots[slot].outstanding = None;
+                self.log(&Event::Write(record.clone()))?;
+                self.writes.push(record);
+            }
+            Ok(Report::Skipped { seq, reason }) => {
+                self.slots[slot].outstanding = None;
+                self.skipped += 1;
+                self.log(&Event::Skipped { t_ms, slot, seq, reason })?;
+            }
+            Ok(Report::Final(state)) => self.slots[slot].final_state = Some(state),
+            Err(error) => self.problems.push(format!("agent {slot}: {error}")),
+        }
+        Ok(())
+    }
+
+    fn issue_writes(&mut self) {
+        let now = Instant::now();
+        let period = Duration::from_secs_f64(1.0 / self.config.write_hz.max(0.01));
+        for slot in 0..self.slots.len() {
+            let ready = self.ready(slot);
+            let s = &mut self.slots[slot];
+            if s.proc.is_none() || s.paused || s.draining || s.outstanding.is_some() || !ready {
+                continue;
+            }
+            let due = *s.next_write.get_or_insert(now);
+            if now < due {
+                continue;
+            }
+            self.seq += 1;
+            let command = Command::Write { seq: self.seq, draw: self.rng.next_u64() };
+            let s = &mut self.slots[slot];
+            s.next_write = Some(due.max(now - period) + period);
+            s.outstanding = Some(self.seq);
+            if let Some(proc) = s.proc.as_mut() {
+                proc.send(&command);
+            }
+        }
+    }
+
+    fn sample(&mut self) {
+        let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
+        let mut shown_by = 0;
+        for slot in self.running() {
+            if let Some((_, status)) = &self.slots[slot].status
+                && status.ready
+                && !self.slots[slot].paused
+                && let Some(digest) = &status.digest
+            {
+                *counts.entry(digest).or_default() += 1;
+                shown_by += 1;
+            }
+        }
+        // The digest more than half of the agents with a graph show; with no such majority, every agent differs.
+        let mode = counts.iter().find(|(_, n)| **n * 2 > shown_by).map(|(d, _)| Some((*d).to_owned()));
+        let t_ms = self.now_ms();
+        for s in &mut self.slots {
+            let shown = match (&s.proc, &s.status) {
+                (None, _) => Shown::Down,
+                _ if s.paused => Shown::Paused,
+                (Some(_), Some((_, status))) if status.ready => {
+                    if mode.as_ref() == Some(&status.digest) {
+                        Shown::Agrees
+                    } else {
+                        Shown::Differs
+                    }
+                }
+                _ => Shown::Joining,
+            };
+            match s.segments.last_mut() {
+                Some(last) if last.shown == shown => last.to_ms = t_ms,
+                Some(last) => {
+                    last.to_ms = t_ms;
+                    s.segments.push(Segment { from_ms: t_ms, to_ms: t_ms, shown });
+                }
+                None => s.segments.push(Segment { from_ms: t_ms, to_ms: t_ms, shown }),
+            }
+        }
+    }
+
+    /// Asks every running agent for its final state, stops the agents and returns what was recorded.
+    fn finish(mut self, episodes: Vec<EpisodeResult>) -> Result<Recorded> {
+        let running: Vec<usize> = self.running().collect();
+        for &slot in &running {
+            if let Some(proc) = self.slots[slot].proc.as_mut() {
+                proc.send(&Command::Final);
+            }
+        }
+        let all = running.clone();
+        self.wait_until(|c| all.iter().all(|s| c.slots[*s].final_state.is_some()), Duration::from_secs(30))?;
+        for &slot in &running {
+            let life = self.slots[slot].lives.saturating_sub(1);
+            match self.slots[slot].final_state.clone() {
+                Some(state) => self.log(&Event::Final { slot, life, state })?,
+                None => self.problems.push(format!("agent {slot} gave no final state")),
+            }
+        }
+        self.history.flush()?;
+        let duration_ms = self.now_ms();
+        let finals = running.iter().filter_map(|s| Some((*s, self.slots[*s].final_state.clone()?))).collect();
+        let timeline = self.slots.iter().map(|s| s.segments.clone()).collect();
+        for slot in &mut self.slots {
+            if let Some(proc) = slot.proc.take() {
+                proc.stop();
+            }
+        }
+        Ok(Recorded {
+            writes: std::mem::take(&mut self.writes),
+            killed_replicas: std::mem::take(&mut self.killed_replicas),
+            finals,
+            episodes,
+            timeline,
+            skipped: self.skipped,
+            problems: std::mem::take(&mut self.problems),
+            duration_ms,
+        })
+    }
+}
+
+impl Drop for Campaign {
+    fn drop(&mut self) {
+        for slot in &mut self.slots {
+            if let Some(proc) = slot.proc.take() {
+                proc.kill();
+            }
+        }
+    }
+}
+
+/// The input filters a network fault puts on each slot.
+pub fn filters_of(fault: &Fault, slots: usize) -> BTreeMap<usize, Filter> {
+    let mut filters: BTreeMap<usize, Filter> = BTreeMap::new();
+    let mut drop = |to: usize, from: std::collections::BTreeSet<usize>, percent: u8| {
+        filters.entry(to).or_default().drop_from.push((from, percent));
+    };
+    match fault {
+        Fault::Loss { agents, percent } => {
+            for &to in agents {
+                drop(to, (0..slots).filter(|a| *a != to).collect(), *percent);
+            }
+        }
+        Fault::OneWay { from, to, percent } => {
+            for &receiver in to {
+                drop(receiver, from.clone(), *percent);
+            }
+        }
+        Fault::Partition { side } => {
+            let rest: std::collections::BTreeSet<usize> = (0..slots).filter(|a| !side.contains(a)).collect();
+            for &a in side {
+                drop(a, rest.clone(), 100);
+            }
+            for &b in &rest {
+                drop(b, side.clone(), 100);
+            }
+        }
+        Fault::Pause { .. } | Fault::Kill { .. } | Fault::LateJoin { .. } => {}
+    }
+    filters
+}

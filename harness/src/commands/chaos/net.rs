@@ -1,0 +1,178 @@
+//! The campaign's network: one Linux network namespace per agent, each joined by a veth pair to a bridge in a
+//! hub namespace, so that to RTPS every agent is a separate host on one LAN (multicast discovery included); and the
+//! faults, as `nftables` rules inside the agents' namespaces.
+//!
+//! Every fault is written as input filters on the receiving side, by source address: random loss from some
+//! senders (`numgen random mod 100 < N drop`), a one-way cut (only one side filters), a partition (both sides
+//! filter), or an isolated namespace (nothing in or out on its interface). A namespace's whole rule set is replaced
+//! atomically on every change. Nothing outside the campaign's own namespaces is touched: the host's namespace keeps
+//! its interfaces, routes and rules, and [`Network`]'s `Drop` deletes the namespaces (their veth pairs go with
+//! them).
+
+use std::collections::BTreeSet;
+use std::io::Write;
+use std::net::Ipv4Addr;
+use std::process::{Command, Stdio};
+
+use anyhow::{Context, Result, bail};
+
+/// What an agent's namespace filters on input.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Filter {
+    /// Drop this percentage of what comes from these agents (100: all of it).
+    pub drop_from: Vec<(BTreeSet<usize>, u8)>,
+    /// Nothing in or out on the namespace's interface.
+    pub isolated: bool,
+}
+
+/// The campaign's namespaces.
+#[derive(Debug)]
+pub struct Network {
+    tag: String,
+    created: Vec<String>,
+}
+
+/// Checks that this process can build the network: root, `ip` (iproute2) and `nft` (nftables).
+///
+/// # Errors
+/// Says which is missing and which Debian package provides it (`scripts/chaos-deps.sh` installs both).
+pub fn preflight() -> Result<()> {
+    let uid = Command::new("id").arg("-u").output().context("running `id -u`")?;
+    if String::from_utf8_lossy(&uid.stdout).trim() != "0" {
+        bail!("cortex chaos must run as root: it creates network namespaces and nftables rules");
+    }
+    for (program, package) in [("ip", "iproute2"), ("nft", "nftables")] {
+        let found = Command::new("sh").args(["-c", &format!("command -v {program}")]).output();
+        if !found.is_ok_and(|o| o.status.success()) {
+            bail!("`{program}` not found on PATH (Debian package {package}; scripts/chaos-deps.sh installs it)");
+        }
+    }
+    Ok(())
+}
+
+fn run(args: &[&str]) -> Result<()> {
+    let output = Command::new(args[0]).args(&args[1..]).output().with_context(|| format!("running {args:?}"))?;
+    if !output.status.success() {
+        bail!("{} failed: {}", args.join(" "), String::from_utf8_lossy(&output.stderr).trim());
+    }
+    Ok(())
+}
+
+impl Network {
+    /// Creates the hub and `agents` agent namespaces, named after `tag` (e.g. `cx1234`).
+    ///
+    /// # Errors
+    /// A command failed (its standard error is quoted); what was created is deleted again.
+    pub fn create(tag: &str, agents: usize) -> Result<Network> {
+        let mut network = Network { tag: tag.to_owned(), created: Vec::new() };
+        let hub = network.hub();
+        network.add_namespace(&hub)?;
+        run(&["ip", "-n", &hub, "link", "set", "lo", "up"])?;
+        run(&["ip", "-n", &hub, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0"])?;
+        run(&["ip", "-n", &hub, "link", "set", "br0", "up"])?;
+        for agent in 0..agents {
+            let ns = network.namespace(agent);
+            network.add_namespace(&ns)?;
+            let port = format!("h{agent}");
+            run(&["ip", "-n", &hub, "link", "add", &port, "type", "veth", "peer", "name", "eth0", "netns", &ns])?;
+            run(&["ip", "-n", &hub, "link", "set", &port, "master", "br0", "up"])?;
+            let address = format!("{}/24", Self::address(agent));
+            run(&["ip", "-n", &ns, "link", "set", "lo", "up"])?;
+            run(&["ip", "-n", &ns, "addr", "add", &address, "dev", "eth0"])?;
+            run(&["ip", "-n", &ns, "link", "set", "eth0", "up"])?;
+            run(&["ip", "-n", &ns, "route", "add", "224.0.0.0/4", "dev", "eth0"])?;
+            network.set_filter(agent, &Filter::default())?;
+        }
+        Ok(network)
+    }
+
+    fn add_namespace(&mut self, name: &str) -> Result<()> {
+        // A namespace left by a campaign that was killed is replaced.
+        let _ = run(&["ip", "netns", "del", name]);
+        run(&["ip", "netns", "add", name])?;
+        self.created.push(name.to_owned());
+        Ok(())
+    }
+
+    fn hub(&self) -> String {
+        format!("{}-hub", self.tag)
+    }
+
+    /// The namespace of agent slot `agent`.
+    pub fn namespace(&self, agent: usize) -> String {
+        format!("{}-a{agent}", self.tag)
+    }
+
+    /// The address of agent slot `agent` (198.19.0.0/24, part of the benchmarking range).
+    pub fn address(agent: usize) -> Ipv4Addr {
+        Ipv4Addr::new(198, 19, 0, 10 + agent as u8)
+    }
+
+    /// Replaces the input filter of agent slot `agent`'s namespace.
+    ///
+    /// # Errors
+    /// `nft` refused the rule set (quoted).
+    pub fn set_filter(&self, agent: usize, filter: &Filter) -> Result<()> {
+        let ruleset = ruleset(filter);
+        let mut child = Command::new("ip")
+            .args(["netns", "exec", &self.namespace(agent), "nft", "-f", "-"])
+            .stdin(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .context("running nft")?;
+        child.stdin.take().context("nft's standard input")?.write_all(ruleset.as_bytes())?;
+        let output = child.wait_with_output()?;
+        if !output.status.success() {
+            bail!("nft refused the rules of agent {agent}: {}\n{ruleset}", String::from_utf8_lossy(&output.stderr));
+        }
+        Ok(())
+    }
+}
+
+/// The `nft -f` input that replaces the `inet chaos` table with `filter`.
+pub fn ruleset(filter: &Filter) -> String {
+    let mut input = String::new();
+    let mut output = String::new();
+    if filter.isolated {
+        input.push_str("    iifname \"eth0\" drop\n");
+        output.push_str("    oifname \"eth0\" drop\n");
+    }
+    for (from, percent) in &filter.drop_from {
+        if from.is_empty() || *percent == 0 {
+            continue;
+        }
+        let set: Vec<String> = from.iter().map(|a| Network::address(*a).to_string()).collect();
+        let random = if *percent >= 100 { String::new() } else { format!("numgen random mod 100 < {percent} ") };
+        input.push_str(&format!("    ip saddr {{ {} }} {random}drop\n", set.join(", ")));
+    }
+    format!(
+        "table inet chaos\ndelete table inet chaos\ntable inet chaos {{\n  chain input {{\n    type filter hook input \
+         priority 0; policy accept;\n{input}  }}\n  chain output {{\n    type filter hook output priority 0; policy \
+         accept;\n{output}  }}\n}}\n"
+    )
+}
+
+impl Drop for Network {
+    fn drop(&mut self) {
+        for name in self.created.iter().rev() {
+            let _ = run(&["ip", "netns", "del", name]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rules_drop_by_source_at_a_rate_or_isolate() {
+        let open = ruleset(&Filter::default());
+        assert!(!open.contains("drop"), "{open}");
+        let filter = Filter { drop_from: vec![([1, 2].into(), 30), ([3].into(), 100)], isolated: false };
+        let rules = ruleset(&filter);
+        assert!(rules.contains("ip saddr { 198.19.0.11, 198.19.0.12 } numgen random mod 100 < 30 drop"), "{rules}");
+        assert!(rules.contains("ip saddr { 198.19.0.13 } drop"), "{rules}");
+        let isolated = ruleset(&Filter { isolated: true, ..Filter::default() });
+        assert!(isolated.contains("iifname \"eth0\" drop") && isolated.contains("oifname \"eth0\" drop"));
+    }
+}

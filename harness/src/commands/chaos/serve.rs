@@ -1,0 +1,133 @@
+//! `cortex chaos-agent`: one agent process of a chaos campaign. It runs a DSR_d agent over RTPS, prints its status
+//! every `--status-ms` and answers the campaign's commands on standard input ([`Command`]) with [`Report`] lines on
+//! standard output; end of input stops it. A malformed command is reported on standard error and skipped.
+
+use std::io::{BufRead, Write};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use agent::Agent;
+use anyhow::{Context, Result};
+use clap::Args;
+use transport::rtps::RtpsConfig;
+
+use super::protocol::{Command, FinalState, Report, StatusLine, parse_command};
+use super::workload::Workload;
+use crate::commands::agent::{AgentTransport, start_rtps_agent};
+
+/// Arguments of `cortex chaos-agent` (started by `cortex chaos`, not by hand).
+#[derive(Debug, Args)]
+pub struct ChaosAgentArgs {
+    /// Agent id.
+    #[arg(long)]
+    pub id: u32,
+    /// DDS domain id.
+    #[arg(long)]
+    pub domain: u16,
+    /// Topic name prefix.
+    #[arg(long, default_value = "dsr")]
+    pub topic_prefix: String,
+    /// The incarnation record of this agent (kept across its restarts).
+    #[arg(long)]
+    pub life_file: PathBuf,
+    /// How long to wait for a running agent's graph before starting alone.
+    #[arg(long, default_value_t = 2000)]
+    pub join_wait_ms: u64,
+    /// Period of status lines.
+    #[arg(long, default_value_t = 100)]
+    pub status_ms: u64,
+    /// Bytes of a camera frame.
+    #[arg(long, default_value_t = 307_200)]
+    pub image_bytes: usize,
+}
+
+/// Runs `cortex chaos-agent`.
+pub fn run(args: ChaosAgentArgs) -> Result<()> {
+    let rtps = RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() };
+    let agent = start_rtps_agent(args.id, args.join_wait_ms, None, rtps, None, Some(args.life_file.clone()))?;
+    let out = Arc::new(Mutex::new(std::io::stdout()));
+    let status = {
+        let (agent, out) = (Arc::clone(&agent), Arc::clone(&out));
+        let period = Duration::from_millis(args.status_ms.max(1));
+        std::thread::spawn(move || {
+            while print(&out, &Report::Status(status_line(&agent))).is_ok() {
+                std::thread::sleep(period);
+            }
+        })
+    };
+    let workload = Workload { agent: args.id, image_bytes: args.image_bytes };
+    for line in std::io::stdin().lock().lines() {
+        let line = line.context("reading standard input")?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let report = match parse_command(&line) {
+            Ok(Command::Write { seq, draw }) => write(&agent, workload, seq, draw),
+            Ok(Command::Final) => Report::Final(final_state(&agent)),
+            Err(error) => {
+                eprintln!("chaos-agent {}: {error}", args.id);
+                continue;
+            }
+        };
+        print(&out, &report).context("writing standard output")?;
+    }
+    agent.shutdown();
+    drop(status);
+    Ok(())
+}
+
+fn print(out: &Mutex<std::io::Stdout>, report: &Report) -> std::io::Result<()> {
+    let line = serde_json::to_string(report).map_err(std::io::Error::other)?;
+    let mut out = out.lock().unwrap_or_else(|p| p.into_inner());
+    writeln!(out, "{line}")?;
+    out.flush()
+}
+
+fn write(agent: &Agent<AgentTransport>, workload: Workload, seq: u64, draw: u64) -> Report {
+    let outcome = agent.update(|replica, now_ns| match workload.write(replica, now_ns, seq, draw) {
+        Ok((record, delta)) => (Ok(record), vec![delta]),
+        Err(reason) => (Err(reason), Vec::new()),
+    });
+    match outcome {
+        Ok(Ok(record)) => Report::Wrote(record),
+        Ok(Err(reason)) => Report::Skipped { seq, reason },
+        Err(error) => Report::Skipped { seq, reason: error.to_string() },
+    }
+}
+
+fn status_line(agent: &Agent<AgentTransport>) -> StatusLine {
+    let status = agent.status();
+    StatusLine {
+        ready: status.ready,
+        replica: status.replica.map(|r| r.0),
+        digest: agent.digest().map(|d| d.to_string()),
+        nodes: status.nodes,
+        edges: status.edges,
+        peers: status.peers.len(),
+        samples_received: status.transport.samples_received,
+        participant_rebuilds: status.transport.participant_rebuilds,
+    }
+}
+
+fn final_state(agent: &Agent<AgentTransport>) -> FinalState {
+    agent.read(final_state_of).unwrap_or(FinalState {
+        digest: None,
+        full_digest: None,
+        applied: None,
+        nodes: 0,
+        edges: 0,
+    })
+}
+
+/// The final state of `replica`.
+pub fn final_state_of(replica: &dsr::Replica) -> FinalState {
+    let digest = replica.digest();
+    FinalState {
+        digest: Some(digest.to_string()),
+        full_digest: Some(digest.0.iter().map(|b| format!("{b:02x}")).collect()),
+        applied: Some(replica.applied().clone()),
+        nodes: replica.nodes().count(),
+        edges: replica.edges().count(),
+    }
+}
