@@ -14,6 +14,12 @@ if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; the
     echo "note: chromium or chromedriver missing and not root: the inspector's browser test skips (fails under CI)" >&2
   fi
 fi
+# The chaos campaign's test (harness/tests/chaos.rs) builds network namespaces with `ip` and faults with `nft`.
+if [ "$(id -u)" = 0 ]; then
+  bash scripts/chaos-deps.sh
+else
+  echo "note: not root: the chaos campaign's test does not run (it needs network namespaces and nftables)" >&2
+fi
 cargo test --workspace --all-targets
 # The RTPS tests once more in a fresh network namespace whose loopback is multicast-capable, where
 # `RtpsConfig::multicast` (default `Auto`) turns multicast on (two participants per transport, one datagram for all

@@ -76,7 +76,6 @@ impl Proc {
             .args(["--image-bytes", &launch.image_bytes.to_string()])
             .arg("--life-file")
             .arg(life_file(&launch.dir, slot))
-            .env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".to_owned()))
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::from(log))
