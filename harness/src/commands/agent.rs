@@ -189,6 +189,19 @@ pub fn start_rtps_agent(
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
     }
+    start_rtps_agent_with(config, rtps, faults)
+}
+
+/// Starts an agent of `config` on RTPS with the real clock ([`start_rtps_agent`] for the usual settings).
+///
+/// # Errors
+/// The DDS domain cannot be joined.
+pub fn start_rtps_agent_with(
+    config: AgentConfig,
+    rtps: RtpsConfig,
+    faults: Option<FaultConfig>,
+) -> Result<Arc<Agent<AgentTransport>>> {
+    let id = config.id.0;
     let rtps = RtpsTransport::new(rtps).context("joining the DDS domain")?;
     let transport: AgentTransport = match faults {
         Some(faults) => {

@@ -45,6 +45,10 @@ pub struct CampaignConfig {
     pub join_wait_ms: u64,
     /// DDS domain.
     pub domain: u16,
+    /// A protocol bug planted in every agent (tests of the campaign itself).
+    #[cfg(feature = "mutants")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plant: Option<String>,
 }
 
 /// One line of `history.jsonl`.
@@ -109,6 +113,8 @@ pub enum Event {
         t_ms: f64,
         /// The episode's index.
         episode: usize,
+        /// Milliseconds from the heal until every running agent heard every other one.
+        heal_to_heard_ms: Option<f64>,
         /// Milliseconds from the heal to the first status round in which all digests were equal.
         heal_to_converge_ms: Option<f64>,
     },
@@ -174,6 +180,10 @@ pub struct EpisodeResult {
     pub start_ms: f64,
     /// When it healed.
     pub heal_ms: f64,
+    /// Milliseconds from the heal until every running agent heard every other one (a new life's peers discovered;
+    /// `None`: not within the settle time). Agents keep hearing each other through most faults, so this is near 0
+    /// except after a restart or a late join.
+    pub heal_to_heard_ms: Option<f64>,
     /// Milliseconds from the heal until every running agent showed the same graph (`None`: not within the settle
     /// time).
     pub heal_to_converge_ms: Option<f64>,
@@ -266,6 +276,8 @@ impl Campaign {
             status_ms: 100,
             image_bytes: config.image_bytes,
             dir,
+            #[cfg(feature = "mutants")]
+            plant: config.plant.clone(),
         };
         let (lines_tx, lines) = channel();
         let slots = (0..config.agents).map(|_| Slot::default()).collect();
@@ -323,8 +335,14 @@ impl Campaign {
         self.converge(heal)?;
         let mut episodes = Vec::new();
         for (index, episode) in schedule.episodes.iter().enumerate() {
-            episodes.push(self.episode(index, episode)?);
+            let result = self.episode(index, episode)?;
+            let converged = result.heal_to_converge_ms.is_some();
+            episodes.push(result);
             self.history.flush()?;
+            if !converged {
+                // What follows would measure nothing: the verdict already fails. Stop here, with the final states.
+                break;
+            }
         }
         self.finish(episodes)
     }
@@ -421,15 +439,17 @@ impl Campaign {
         let heal = Instant::now();
         let heal_ms = self.ms(heal);
         self.log(&Event::Heal { t_ms: heal_ms, episode: index })?;
-        let converged = self.converge(heal)?;
+        let (heard, converged) = self.converge(heal)?;
         let t_ms = self.now_ms();
-        let heal_to_converge_ms = converged.map(|d| d.as_secs_f64() * 1e3);
-        self.log(&Event::Converged { t_ms, episode: index, heal_to_converge_ms })?;
+        let ms = |d: Option<Duration>| d.map(|d| d.as_secs_f64() * 1e3);
+        let (heal_to_heard_ms, heal_to_converge_ms) = (ms(heard), ms(converged));
+        self.log(&Event::Converged { t_ms, episode: index, heal_to_heard_ms, heal_to_converge_ms })?;
         Ok(EpisodeResult {
             kind: episode.fault.kind().to_owned(),
             description: episode.fault.describe(),
             start_ms: self.ms(start),
             heal_ms,
+            heal_to_heard_ms,
             heal_to_converge_ms,
         })
     }
@@ -443,11 +463,32 @@ impl Campaign {
     }
 
     /// Waits until every running agent has, after `since`, reported a graph with the same digest, and no write is
-    /// outstanding; the time from `since`, or `None` after the settle time.
-    fn converge(&mut self, since: Instant) -> Result<Option<Duration>> {
-        let settle = Duration::from_millis(self.config.settle_ms);
-        let agreed = self.wait_until(|c| c.agreed_since(since), settle)?;
-        Ok(agreed.then(|| since.elapsed()))
+    /// outstanding. Returns the times from `since` until every running agent had heard every other one (all peers
+    /// discovered) and until they agreed; `None` for what did not happen within the settle time.
+    fn converge(&mut self, since: Instant) -> Result<(Option<Duration>, Option<Duration>)> {
+        let deadline = since + Duration::from_millis(self.config.settle_ms);
+        let mut heard = None;
+        loop {
+            if heard.is_none() && self.heard_since(since) {
+                heard = Some(since.elapsed());
+            }
+            if self.agreed_since(since) {
+                let agreed = since.elapsed();
+                return Ok((heard.or(Some(agreed)), Some(agreed)));
+            }
+            if Instant::now() >= deadline {
+                return Ok((heard, None));
+            }
+            self.pump_once()?;
+        }
+    }
+
+    /// Whether every running agent has reported, after `since`, that it hears all the others.
+    fn heard_since(&self, since: Instant) -> bool {
+        let running = self.running().count();
+        self.running().all(|slot| {
+            self.slots[slot].status.as_ref().is_some_and(|(at, s)| *at >= since && s.ready && s.peers + 1 >= running)
+        })
     }
 
     fn agreed_since(&self, since: Instant) -> bool {

@@ -74,6 +74,11 @@ pub struct ChaosArgs {
     /// and summary.json/summary.md.
     #[arg(long, default_value = "chaos-out")]
     pub out: PathBuf,
+    /// Plant this protocol bug in every agent (an `agent::mutants::ProtocolMutant` name, e.g.
+    /// `IncarnationForgotten`), to check that the campaign catches it. Only in a build with the `mutants` feature.
+    #[cfg(feature = "mutants")]
+    #[arg(long)]
+    pub plant: Option<String>,
 }
 
 /// Runs `cortex chaos`; `Ok(false)` when a campaign found a violation.
@@ -83,6 +88,10 @@ pub fn run(args: ChaosArgs) -> Result<bool> {
     }
     if args.agents > 200 || args.write_hz <= 0.0 || args.fault_ms < 500 {
         bail!("--agents must be at most 200, --write-hz positive and --fault-ms at least 500");
+    }
+    #[cfg(feature = "mutants")]
+    if let Some(name) = &args.plant {
+        serve::protocol_mutant(name)?;
     }
     net::preflight()?;
     let program = std::env::current_exe().context("finding the cortex binary")?;
@@ -139,6 +148,8 @@ fn run_one(
         settle_ms: args.settle_ms,
         join_wait_ms: args.join_wait_ms,
         domain: args.domain,
+        #[cfg(feature = "mutants")]
+        plant: args.plant.clone(),
     };
     let schedule = Schedule::generate(seed, args.agents, args.rounds, args.fault_ms);
     let dir = args.out.join(format!("seed-{seed}"));

@@ -149,6 +149,16 @@ pub struct KindSummary {
     pub worst_ms: Option<f64>,
     /// Episodes that did not converge within the settle time.
     pub not_converged: usize,
+    /// Median milliseconds from heal until every agent heard every other one.
+    pub heard_median_ms: Option<f64>,
+    /// Worst.
+    pub heard_worst_ms: Option<f64>,
+}
+
+/// The median and the worst of `values`.
+fn median_and_worst(mut values: Vec<f64>) -> (Option<f64>, Option<f64>) {
+    values.sort_by(f64::total_cmp);
+    (values.get(values.len() / 2).copied(), values.last().copied())
 }
 
 /// `summary.json` over several campaigns.
@@ -171,6 +181,7 @@ impl Summary {
     pub fn of(reports: &[CampaignReport]) -> Summary {
         let mut summary = Summary::default();
         let mut times: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        let mut heard: BTreeMap<String, Vec<f64>> = BTreeMap::new();
         for report in reports {
             summary.seeds.push(report.config.seed);
             if !report.passed {
@@ -181,17 +192,22 @@ impl Summary {
             for episode in &report.episodes {
                 let kind = summary.kinds.entry(episode.kind.clone()).or_default();
                 kind.episodes += 1;
+                if let Some(ms) = episode.heal_to_heard_ms {
+                    heard.entry(episode.kind.clone()).or_default().push(ms);
+                }
                 match episode.heal_to_converge_ms {
                     Some(ms) => times.entry(episode.kind.clone()).or_default().push(ms),
                     None => kind.not_converged += 1,
                 }
             }
         }
-        for (kind, mut values) in times {
-            values.sort_by(f64::total_cmp);
+        for (kind, values) in times {
             let entry = summary.kinds.entry(kind).or_default();
-            entry.median_ms = Some(values[values.len() / 2]);
-            entry.worst_ms = values.last().copied();
+            (entry.median_ms, entry.worst_ms) = median_and_worst(values);
+        }
+        for (kind, values) in heard {
+            let entry = summary.kinds.entry(kind).or_default();
+            (entry.heard_median_ms, entry.heard_worst_ms) = median_and_worst(values);
         }
         summary
     }
@@ -208,18 +224,21 @@ impl Summary {
             self.lost_with_killed_writer
         );
         md.push_str(
-            "| fault | episodes | heal → convergence, median | worst | not converged |\n|---|---:|---:|---:|---:|\n",
+            "| fault | episodes | heal → convergence, median | worst | not converged | heal → all peers heard, median \
+             | worst |\n|---|---:|---:|---:|---:|---:|---:|\n",
         );
         for kind in Fault::KINDS {
             let Some(k) = self.kinds.get(kind) else { continue };
             let ms = |v: Option<f64>| v.map_or("—".to_owned(), |v| format!("{v:.0} ms"));
             let _ = writeln!(
                 md,
-                "| {kind} | {} | {} | {} | {} |",
+                "| {kind} | {} | {} | {} | {} | {} | {} |",
                 k.episodes,
                 ms(k.median_ms),
                 ms(k.worst_ms),
-                k.not_converged
+                k.not_converged,
+                ms(k.heard_median_ms),
+                ms(k.heard_worst_ms)
             );
         }
         md

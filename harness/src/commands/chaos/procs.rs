@@ -40,6 +40,9 @@ pub struct Launch {
     pub image_bytes: usize,
     /// The campaign's directory (agent logs and incarnation records go under it).
     pub dir: PathBuf,
+    /// A protocol bug to plant in every agent.
+    #[cfg(feature = "mutants")]
+    pub plant: Option<String>,
 }
 
 /// One running agent process.
@@ -66,7 +69,8 @@ impl Proc {
             .open(&log_path)
             .with_context(|| format!("opening {}", log_path.display()))?;
         let _ = writeln!(log, "--- life {life}");
-        let mut child = Command::new("ip")
+        let mut command = Command::new("ip");
+        command
             .args(["netns", "exec", namespace])
             .arg(&launch.program)
             .arg("chaos-agent")
@@ -75,7 +79,12 @@ impl Proc {
             .args(["--status-ms", &launch.status_ms.to_string()])
             .args(["--image-bytes", &launch.image_bytes.to_string()])
             .arg("--life-file")
-            .arg(life_file(&launch.dir, slot))
+            .arg(life_file(&launch.dir, slot));
+        #[cfg(feature = "mutants")]
+        if let Some(name) = &launch.plant {
+            command.args(["--plant", name]);
+        }
+        let mut child = command
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::from(log))

@@ -7,14 +7,14 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use agent::Agent;
+use agent::{Agent, AgentConfig, AgentId};
 use anyhow::{Context, Result};
 use clap::Args;
 use transport::rtps::RtpsConfig;
 
 use super::protocol::{Command, FinalState, Report, StatusLine, parse_command};
 use super::workload::Workload;
-use crate::commands::agent::{AgentTransport, start_rtps_agent};
+use crate::commands::agent::{AgentTransport, start_rtps_agent_with};
 
 /// Arguments of `cortex chaos-agent` (started by `cortex chaos`, not by hand).
 #[derive(Debug, Args)]
@@ -40,12 +40,37 @@ pub struct ChaosAgentArgs {
     /// Bytes of a camera frame.
     #[arg(long, default_value_t = 307_200)]
     pub image_bytes: usize,
+    /// Plant this protocol bug (an `agent::mutants::ProtocolMutant` name), so that a test can check that the
+    /// campaign catches it. Only in a build with the `mutants` feature.
+    #[cfg(feature = "mutants")]
+    #[arg(long)]
+    pub plant: Option<String>,
+}
+
+/// The protocol bug named `name` (`agent::mutants::ProtocolMutant`'s variant name).
+///
+/// # Errors
+/// No such mutant; the message lists them.
+#[cfg(feature = "mutants")]
+pub fn protocol_mutant(name: &str) -> Result<agent::mutants::ProtocolMutant> {
+    use agent::mutants::ProtocolMutant;
+    ProtocolMutant::ALL.into_iter().find(|m| format!("{m:?}") == name).ok_or_else(|| {
+        let names: Vec<String> = ProtocolMutant::ALL.iter().map(|m| format!("{m:?}")).collect();
+        anyhow::anyhow!("no protocol mutant {name:?} (one of {})", names.join(", "))
+    })
 }
 
 /// Runs `cortex chaos-agent`.
 pub fn run(args: ChaosAgentArgs) -> Result<()> {
     let rtps = RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() };
-    let agent = start_rtps_agent(args.id, args.join_wait_ms, None, rtps, None, Some(args.life_file.clone()))?;
+    let mut config = AgentConfig::new(AgentId(args.id));
+    config.join_wait = Duration::from_millis(args.join_wait_ms);
+    config.life_file = Some(args.life_file.clone());
+    #[cfg(feature = "mutants")]
+    if let Some(name) = &args.plant {
+        config.plant = agent::mutants::Plant::of(Some(protocol_mutant(name)?));
+    }
+    let agent = start_rtps_agent_with(config, rtps, None)?;
     let out = Arc::new(Mutex::new(std::io::stdout()));
     let status = {
         let (agent, out) = (Arc::clone(&agent), Arc::clone(&out));
