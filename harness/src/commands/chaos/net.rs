@@ -7,11 +7,12 @@
 //! filter), or an isolated namespace (nothing in or out on its interface). A namespace's whole rule set is replaced
 //! atomically on every change. Nothing outside the campaign's own namespaces is touched: the host's namespace keeps
 //! its interfaces, routes and rules, and [`Network`]'s `Drop` deletes the namespaces (their veth pairs go with
-//! them).
+//! them); a campaign that was killed before it could do so has its namespaces removed by the next one.
 
 use std::collections::BTreeSet;
 use std::io::Write;
 use std::net::Ipv4Addr;
+use std::path::Path;
 use std::process::{Command, Stdio};
 
 use anyhow::{Context, Result, bail};
@@ -64,6 +65,7 @@ impl Network {
     /// # Errors
     /// A command failed (its standard error is quoted); what was created is deleted again.
     pub fn create(tag: &str, agents: usize) -> Result<Network> {
+        remove_stale();
         let mut network = Network { tag: tag.to_owned(), created: Vec::new() };
         let hub = network.hub();
         network.add_namespace(&hub)?;
@@ -129,6 +131,24 @@ impl Network {
     }
 }
 
+/// Deletes the namespaces of campaigns whose process is gone (killed before it could clean up): names
+/// `cx<PID>-...` with no process `PID`.
+fn remove_stale() {
+    let Ok(list) = Command::new("ip").args(["netns", "list"]).output() else { return };
+    for line in String::from_utf8_lossy(&list.stdout).lines() {
+        let name = line.split_whitespace().next().unwrap_or("");
+        let Some(pid) = stale_pid(name) else { continue };
+        if !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = run(&["ip", "netns", "del", name]);
+        }
+    }
+}
+
+/// The campaign process id in a namespace name `cx<PID>-...`.
+fn stale_pid(name: &str) -> Option<u32> {
+    name.strip_prefix("cx")?.split_once('-')?.0.parse().ok()
+}
+
 /// The `nft -f` input that replaces the `inet chaos` table with `filter`.
 pub fn ruleset(filter: &Filter) -> String {
     let mut input = String::new();
@@ -174,5 +194,9 @@ mod tests {
         assert!(rules.contains("ip saddr { 198.19.0.13 } drop"), "{rules}");
         let isolated = ruleset(&Filter { isolated: true, ..Filter::default() });
         assert!(isolated.contains("iifname \"eth0\" drop") && isolated.contains("oifname \"eth0\" drop"));
+        assert_eq!(stale_pid("cx1234-a0"), Some(1234));
+        assert_eq!(stale_pid("cx1234-hub"), Some(1234));
+        assert_eq!(stale_pid("mynet"), None);
+        assert_eq!(stale_pid("cxfoo-a1"), None);
     }
 }
