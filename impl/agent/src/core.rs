@@ -40,6 +40,9 @@ pub const MAX_ANSWERED: usize = 1024;
 pub const INCARNATION_LIMIT: u32 = 1 << 20;
 /// Without a recorded incarnation, the floor is drawn from the nonce below this.
 pub const RANDOM_FLOOR_LIMIT: u32 = 1 << 16;
+/// Above this many payload bytes of retained deltas, a missing-request is answered with a snapshot instead when the
+/// snapshot is smaller: the history keeps every overwritten camera frame, a snapshot only the current ones.
+pub const SNAPSHOT_IF_SMALLER_ABOVE_BYTES: usize = 1 << 20;
 
 /// The protocol's settings, in nanoseconds.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -680,10 +683,13 @@ impl AgentCore {
                     None
                 }
             }
-            Missing::Deltas(deltas) => {
-                self.batches(from, &deltas, out);
-                None
-            }
+            Missing::Deltas(deltas) => match self.smaller_snapshot(&deltas) {
+                Some(snapshot) => Some(snapshot),
+                None => {
+                    self.batches(from, &deltas, out);
+                    None
+                }
+            },
             Missing::Snapshot => self.snapshot_bytes(),
         };
         if let Some((snapshot, _)) = snapshot {
@@ -705,6 +711,16 @@ impl AgentCore {
         out.events.push(Event::Answered { to: from, snapshot_bytes: snapshot.len(), from_cache });
         let answer = Message::GraphAnswer { from: self.config.id, to: from, nonce, snapshot };
         out.send(Channel::Sync, answer, Dest::Sender);
+    }
+
+    /// The encoded snapshot, if `deltas` carry more than [`SNAPSHOT_IF_SMALLER_ABOVE_BYTES`] of payload and the
+    /// snapshot is smaller than that payload.
+    fn smaller_snapshot(&mut self, deltas: &[Arc<Delta>]) -> Option<(Bytes, bool)> {
+        let payload: usize = deltas.iter().map(|d| d.payload_bytes()).sum();
+        if payload <= SNAPSHOT_IF_SMALLER_ABOVE_BYTES {
+            return None;
+        }
+        self.snapshot_bytes().filter(|(snapshot, _)| snapshot.len() < payload)
     }
 
     /// The encoded snapshot (cached per causal context), and whether it came from the cache.

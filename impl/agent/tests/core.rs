@@ -76,3 +76,41 @@ fn operations_of_this_lifes_own_id_that_it_made_are_no_collision() {
     let events = deliver(&written.sends(), &mut a);
     assert!(a.collision().is_none(), "{events:?}");
 }
+
+/// The answer to a missing-request of a life that lacks `frames` overwritten camera frames of `frame_bytes` each.
+fn answer_to_a_peer_missing_frames(frames: u32, frame_bytes: usize) -> Vec<Message> {
+    let (mut writer, _) = alone(11, Some(0));
+    let (camera, _) = writer
+        .write(1, |r, now| r.insert_node(now, NewNode::new("camera", "cam")).map(|(id, d)| (id, vec![d])))
+        .unwrap();
+    for frame in 0..frames {
+        let image = dsr::Value::Bytes(vec![frame as u8; frame_bytes].into());
+        writer
+            .write(2 + u64::from(frame), |r, now| r.set_attrs(now, camera, [("cam_rgb", image)]).map(|d| ((), vec![d])))
+            .unwrap();
+    }
+    let request =
+        Message::MissingRequest { from: AgentId(4), to: AgentId(3), applied: dsr::CausalContext::new(), full: false };
+    let input = Input::decode(Message::decode(&request.encode()).unwrap()).input.unwrap();
+    writer.handle(100, input).sends.into_iter().map(|s| s.message).collect()
+}
+
+#[test]
+fn a_peer_missing_many_overwritten_frames_gets_a_snapshot_and_one_missing_a_few_gets_the_deltas() {
+    // Twelve 300 kB frames of one camera: 3.6 MB of retained deltas, a snapshot of one frame.
+    let answer = answer_to_a_peer_missing_frames(12, 300_000);
+    assert!(
+        matches!(answer.as_slice(), [Message::Snapshot { .. }]),
+        "{:?}",
+        answer.iter().map(Message::kind).collect::<Vec<_>>()
+    );
+    let Message::Snapshot { snapshot, .. } = &answer[0] else { unreachable!() };
+    assert!(snapshot.len() < 400_000, "{} bytes", snapshot.len());
+    // Two small frames: the deltas themselves (below the threshold, no snapshot is even encoded).
+    let answer = answer_to_a_peer_missing_frames(2, 1_000);
+    assert!(
+        answer.iter().all(|m| matches!(m, Message::Deltas { .. })),
+        "{:?}",
+        answer.iter().map(Message::kind).collect::<Vec<_>>()
+    );
+}
