@@ -36,8 +36,10 @@
 //!
 //! **Anti-entropy.** Every [`AgentConfig::announce_period`] an agent announces its causal context. An agent that
 //! sees in an announce dots it lacks asks that peer ([`envelope::Message::MissingRequest`]); the peer answers with
-//! `Replica::missing_for` — the retained deltas, or a snapshot when its bounded history does not cover the gap. So
-//! the graph converges after loss, a healed partition and a restart.
+//! `Replica::missing_for` — the retained deltas, or a snapshot when its bounded history does not cover the gap —
+//! and with a snapshot also when the deltas carry more than [`core::SNAPSHOT_IF_SMALLER_ABOVE_BYTES`] of payload
+//! and the snapshot is smaller (the history keeps every overwritten camera frame). So the graph converges after
+//! loss, a healed partition and a restart.
 //!
 //! **Remote calls.** [`Agent::call`] calls a named method of another agent's BICA runtime (request/reply on
 //! [`transport::Channel::Calls`], typed with serde, bounded in flight, with a timeout); an agent serves them once
