@@ -8,7 +8,7 @@
 //!
 //! Modules: [`schedule`] (the seeded faults), [`net`] (namespaces and rules), [`procs`] (agent processes),
 //! [`protocol`] (the lines between the campaign and its agents), [`workload`] (what an agent writes), [`serve`]
-//! (the agent process), [`campaign`] (running one campaign), [`check`] (the verdict), [`output`] (files and figure).
+//! (the agent process), [`campaign`] (running one campaign), [`record`] (what it records), [`check`] (the verdict), [`output`] (files and figure).
 //!
 //! Exit code: 0 when every campaign passed, 3 when one found a violation (listed, and in `verdict.json`), 1 when a
 //! campaign could not run (not root, `ip` or `nft` missing, a process that cannot start).
@@ -19,6 +19,7 @@ pub mod net;
 pub mod output;
 pub mod procs;
 pub mod protocol;
+pub mod record;
 pub mod schedule;
 pub mod serve;
 pub mod workload;
@@ -30,8 +31,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 
-use campaign::{Campaign, CampaignConfig};
+use campaign::Campaign;
 use output::{CampaignReport, Summary};
+use record::CampaignConfig;
 use schedule::Schedule;
 
 /// Exit code of a campaign that found a violation.

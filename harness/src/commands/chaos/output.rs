@@ -11,8 +11,8 @@ use measure::lanes::{Band, Lane, LaneState, Lanes};
 use measure::provenance::Provenance;
 use serde::{Deserialize, Serialize};
 
-use super::campaign::{CampaignConfig, EpisodeResult, Recorded, Shown};
 use super::check::Verdict;
+use super::record::{CampaignConfig, EpisodeResult, Recorded, Shown};
 use super::schedule::Fault;
 
 /// `verdict.json` of one campaign.
