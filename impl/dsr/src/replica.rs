@@ -292,6 +292,9 @@ impl Replica {
     /// The operations whose deltas this replica has joined (their generated dots): what anti-entropy exchanges
     /// ([`Replica::missing_for`]). Usually a plain version vector.
     pub fn applied(&self) -> &CausalContext {
+        if self.plant.is(DsrMutant::AppliedReportsContext) {
+            return &self.ctx;
+        }
         &self.applied
     }
 
@@ -342,6 +345,10 @@ impl Replica {
     }
 
     fn tick(&mut self, now_ns: u64) -> Stamp {
+        if self.plant.is(DsrMutant::StampTiesPhysicalClock) && now_ns >= self.clock.0 {
+            self.clock = Stamp(now_ns);
+            return self.clock;
+        }
         self.clock = Stamp(now_ns.max(self.clock.0.saturating_add(1)));
         self.clock
     }
@@ -388,6 +395,7 @@ impl Replica {
             ctx,
             applied: CausalContext::default(),
             store,
+            plant: self.plant,
         });
         self.join(&delta);
         for dot in delta.origin.iter().flat_map(Origin::dots) {
@@ -703,7 +711,7 @@ impl Replica {
     fn can_install(&self, delta: &Delta) -> bool {
         delta.complete
             && delta.origin.is_none()
-            && self.plant == Plant::NONE
+            && (self.plant == Plant::NONE || self.plant.is(DsrMutant::InstallDropsTombstones))
             && self.ctx.is_empty()
             && self.applied.is_empty()
             && self.store.nodes.is_empty()
@@ -726,7 +734,10 @@ impl Replica {
                 .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
         }
         let Delta { clock, ctx, applied, store, .. } = delta;
-        let Store { tombstones, mut nodes, mut edges } = store;
+        let Store { mut tombstones, mut nodes, mut edges } = store;
+        if self.plant.is(DsrMutant::InstallDropsTombstones) {
+            tombstones.clear();
+        }
         nodes.retain(|id, node| {
             if tombstones.contains(id) {
                 return false;
@@ -907,7 +918,9 @@ impl Replica {
             if mine.core.join(&theirs.core, &self.ctx, &delta.ctx, plant) {
                 names_to_reindex.push(*id);
             }
-            join_attrs(&mut mine.attrs, &theirs.attrs, &self.ctx, &delta.ctx, delta.complete, plant);
+            if !(plant.is(DsrMutant::EarlyAttrDropped) && mine.core.is_empty()) {
+                join_attrs(&mut mine.attrs, &theirs.attrs, &self.ctx, &delta.ctx, delta.complete, plant);
+            }
             if mine.is_empty() {
                 self.store.nodes.remove(id);
             }
@@ -954,8 +967,8 @@ impl Replica {
             self.store.edges.retain(|_, edge| !edge.is_empty());
         }
 
-        self.ctx.merge(&delta.ctx);
-        if origin != Some(self.id) {
+        self.ctx.merge_planted(&delta.ctx, plant);
+        if origin != Some(self.id) && !(delta.complete && plant.is(DsrMutant::SnapshotJoinKeepsClock)) {
             // A local operation has already ticked the clock past its own stamp.
             self.clock = self.clock.max(delta.clock);
         }
@@ -979,7 +992,7 @@ impl Replica {
             touched.edges.extend(self.store.edges.keys().cloned());
         }
         let nodes: Vec<NodeId> = touched.nodes.iter().copied().collect();
-        for id in nodes {
+        for id in nodes.into_iter().filter(|_| !self.plant.is(DsrMutant::IncidentEdgeEventsMissing)) {
             touched.edges.extend(self.incident_edges(id));
         }
         let mut names = |element: Element, attrs: Option<&Attrs>| {
@@ -1090,7 +1103,14 @@ impl Replica {
     /// Brings the name index up to date for nodes whose core changed or that were deleted.
     fn reindex_names(&mut self, ids: &[NodeId]) {
         for id in ids {
+            let stale_kept = self.plant.is(DsrMutant::NameKeptByDeletedHolder)
+                && self.store.tombstones.contains(id)
+                && self
+                    .indexed_names
+                    .get(id)
+                    .is_some_and(|(name, _)| self.names.get(name).is_some_and(|h| h.len() > 1));
             if let Some((name, stamp)) = self.indexed_names.remove(id)
+                && !stale_kept
                 && let Some(holders) = self.names.get_mut(&name)
             {
                 holders.remove(&(stamp, *id));
@@ -1120,6 +1140,7 @@ impl Replica {
             ctx: self.ctx.clone(),
             applied: self.applied.clone(),
             store: self.store.clone(),
+            plant: Plant::NONE,
         }
     }
 
@@ -1141,6 +1162,7 @@ impl Replica {
             ctx: &self.ctx,
             applied: &self.applied,
             store: &self.store,
+            plant: Plant::NONE,
         };
         let mut out = Vec::new();
         parts.encode_into(&mut out);
@@ -1165,7 +1187,9 @@ impl Replica {
                 selected.push(Arc::clone(delta));
             }
         }
-        if !missing.iter().all(|dot| covered.contains(dot)) {
+        // Mutant: the oldest missing operation is taken as retained.
+        let unchecked = usize::from(self.plant.is(DsrMutant::HistoryOffByOne));
+        if !missing.iter().skip(unchecked).all(|dot| covered.contains(dot)) {
             return Missing::Snapshot;
         }
         if self.plant.is(DsrMutant::AntiEntropySkipsLastDelta) {
