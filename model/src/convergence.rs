@@ -1006,6 +1006,11 @@ fn conflicts_happen(model: &ConvergenceModel, state: &State) -> bool {
     })
 }
 
+fn snapshot_answered(model: &ConvergenceModel, state: &State) -> bool {
+    // Vacuous without announces; with them, a history too short for the gap must be seen to fall back.
+    model.setup().config.syncs == 0 || state.network.iter_all().any(|e| matches!(e.msg, Msg::Snapshot { .. }))
+}
+
 fn quiescent_end_reached(model: &ConvergenceModel, state: &State) -> bool {
     budgets_spent(&model.inner.cfg, state) && quiescent(state)
 }
@@ -1038,6 +1043,8 @@ pub mod properties {
         "quiescent, budget spent: every replica applied every operation and equals the specification";
     /// Conflicts are explored.
     pub const CONFLICTS: &str = "concurrent conflicting operations happen";
+    /// Anti-entropy falls back to a snapshot (with announces).
+    pub const SNAPSHOT: &str = "an announce is answered with a snapshot (when announces are allowed)";
     /// The quiescent end is reached (the quiescent properties are not vacuous).
     pub const END: &str = "a quiescent state with the budget spent is reached";
 }
@@ -1112,6 +1119,7 @@ impl Model for ConvergenceModel {
             Property::always(properties::CONVERGE, quiescent_replicas_converge),
             Property::always(properties::SPEC, quiescent_replicas_match_spec),
             Property::sometimes(properties::CONFLICTS, conflicts_happen),
+            Property::sometimes(properties::SNAPSHOT, snapshot_answered),
             Property::sometimes(properties::END, quiescent_end_reached),
         ]
     }

@@ -63,9 +63,13 @@ pub fn dsr_mutant_configs() -> Vec<(DsrMutant, ConvergenceConfig)> {
                 DsrMutant::IncidentEdgeEventsMissing
                 | DsrMutant::InstallDropsTombstones
                 | DsrMutant::CodecDotOffset => config(2, 1, nondup),
-                // An overwrite that arrives without the write it removed; an attribute write on an inserted node
-                // that arrives before the node.
-                DsrMutant::AppliedReportsContext | DsrMutant::EarlyAttrDropped => config(2, 2, nondup),
+                // An attribute write on an inserted node that arrives before the node.
+                DsrMutant::EarlyAttrDropped => config(2, 2, nondup),
+                // An overwrite that reaches one replica without the write it removed; that replica's snapshot
+                // (no history at all) answers a third one's announce.
+                DsrMutant::SnapshotAppliedFromContext => {
+                    ConvergenceConfig { syncs: 1, history: 0, ..config(3, 2, nondup) }
+                }
                 // Three operations of one replica, the first arriving after the third; two concurrent inserts of
                 // one name, then the holder deleted.
                 DsrMutant::ContextCompactionSkipsGap | DsrMutant::NameKeptByDeletedHolder => config(2, 3, nondup),

@@ -23,9 +23,10 @@ pub enum DsrMutant {
     /// Context compaction closes a one-dot gap: a dot that extends the version vector also absorbs an
     /// out-of-order dot two further on, so the missing dot between them counts as seen.
     ContextCompactionSkipsGap,
-    /// The replica reports its causal context as the operations it has applied, so anti-entropy compares contexts
-    /// (which also hold dots that were only seen removed) and never sends those operations.
-    AppliedReportsContext,
+    /// A joined snapshot's causal context is taken as the operations its sender had applied (instead of the
+    /// snapshot's own list of them), so the receiver claims operations it only saw removed, and anti-entropy, which
+    /// compares applied operations, never sends them.
+    SnapshotAppliedFromContext,
     /// The history is taken to reach one delta further back than it does: the oldest operation a peer lacks is
     /// counted as retained, and the answer leaves it out instead of falling back to a snapshot.
     HistoryOffByOne,
@@ -58,7 +59,7 @@ impl DsrMutant {
         DsrMutant::EdgeToDeletedNodeVisible,
         DsrMutant::AntiEntropySkipsLastDelta,
         DsrMutant::ContextCompactionSkipsGap,
-        DsrMutant::AppliedReportsContext,
+        DsrMutant::SnapshotAppliedFromContext,
         DsrMutant::HistoryOffByOne,
         DsrMutant::InstallDropsTombstones,
         DsrMutant::CodecDotOffset,

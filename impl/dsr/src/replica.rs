@@ -292,9 +292,6 @@ impl Replica {
     /// The operations whose deltas this replica has joined (their generated dots): what anti-entropy exchanges
     /// ([`Replica::missing_for`]). Usually a plain version vector.
     pub fn applied(&self) -> &CausalContext {
-        if self.plant.is(DsrMutant::AppliedReportsContext) {
-            return &self.ctx;
-        }
         &self.applied
     }
 
@@ -824,7 +821,9 @@ impl Replica {
             self.applied.insert(dot);
         }
         if delta.complete {
-            self.applied.merge(&delta.applied);
+            let sender_applied =
+                if self.plant.is(DsrMutant::SnapshotAppliedFromContext) { &delta.ctx } else { &delta.applied };
+            self.applied.merge(sender_applied);
         }
         if !duplicate && delta.origin.is_some() && !delta.complete {
             self.log.push(shared());
