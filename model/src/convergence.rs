@@ -380,6 +380,11 @@ fn check_change_events(before: &VisibleGraph, after: &VisibleGraph, events: &[Ch
             Change::NodeDeleted { id } => {
                 graph.nodes.remove(id);
             }
+            Change::NodeRenamed { id } => {
+                let now = after.nodes.get(id).ok_or_else(|| format!("{:?} for an invisible node", event.change))?;
+                let node = graph.nodes.get_mut(id).ok_or_else(|| format!("{:?} before it appeared", event.change))?;
+                node.name.clone_from(&now.name);
+            }
             Change::EdgeInserted { key } => {
                 graph.edges.insert(key.clone(), BTreeMap::new());
             }
@@ -409,13 +414,6 @@ fn check_change_events(before: &VisibleGraph, after: &VisibleGraph, events: &[Ch
                     attrs.remove(name);
                 }
             }
-        }
-    }
-    // Shown names follow from the nodes visible (a conflict's loser is `name#id`); they are compared after the
-    // events, as a reader that re-reads the names of the nodes an event touched would see them.
-    for (id, node) in graph.nodes.iter_mut() {
-        if let Some(now) = after.nodes.get(id) {
-            node.name.clone_from(&now.name);
         }
     }
     if same_winners(&graph, after) {

@@ -72,7 +72,8 @@
 //! **Names.** Node names are unique among visible nodes. A local insert with a name already visible is refused.
 //! Two agents that concurrently insert different nodes with the same name both succeed; every replica then shows
 //! the node with the lowest (insert stamp, id) under the plain name and the other as `name#id`. Node names may not
-//! contain `#`. If the holder is deleted, the other takes the plain name back.
+//! contain `#`. If the holder is deleted, the other takes the plain name back. A node whose shown name changes
+//! either way is reported by a [`Change::NodeRenamed`] event (found by the model).
 //!
 //! **Delivery.** Deltas may arrive in any order and more than once. One that refers to something not yet seen (an
 //! edge before its nodes, an attribute before its node) is kept and becomes visible when the rest arrives.

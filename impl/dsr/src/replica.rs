@@ -69,6 +69,12 @@ pub enum Change {
         /// The node.
         id: NodeId,
     },
+    /// A visible node's shown name changed: it took its plain name back (the node that held the name was deleted)
+    /// or became `name#id` (a concurrent insert of the same name holds it now).
+    NodeRenamed {
+        /// The node.
+        id: NodeId,
+    },
     /// An edge became visible.
     EdgeInserted {
         /// The edge.
@@ -220,7 +226,8 @@ struct Touched {
 
 /// What is visible of the touched elements (before or after a join), for change events.
 struct Visibility {
-    nodes: BTreeMap<NodeId, bool>,
+    /// `None` if invisible, else whether the node shows its plain name (not `name#id`).
+    nodes: BTreeMap<NodeId, Option<bool>>,
     edges: BTreeMap<EdgeKey, bool>,
     attrs: BTreeMap<(Element, Name), Option<Dot>>,
 }
@@ -990,6 +997,19 @@ impl Replica {
             touched.nodes.extend(self.store.nodes.keys().copied());
             touched.edges.extend(self.store.edges.keys().cloned());
         }
+        // A node that arrives or goes may take a name from, or give it back to, the visible nodes sharing it.
+        let names: BTreeSet<&Name> = touched
+            .nodes
+            .iter()
+            .flat_map(|id| {
+                let mine = self.store.nodes.get(id).map(|n| n.core.values.iter()).into_iter().flatten();
+                let theirs = delta.store.nodes.get(id).map(|n| n.core.values.iter()).into_iter().flatten();
+                mine.chain(theirs).map(|core| &core.value.name)
+            })
+            .collect();
+        let sharing: Vec<NodeId> =
+            names.into_iter().flat_map(|name| self.names.get(name).into_iter().flatten().map(|(_, id)| *id)).collect();
+        touched.nodes.extend(sharing);
         let nodes: Vec<NodeId> = touched.nodes.iter().copied().collect();
         for id in nodes.into_iter().filter(|_| !self.plant.is(DsrMutant::IncidentEdgeEventsMissing)) {
             touched.edges.extend(self.incident_edges(id));
@@ -1013,7 +1033,7 @@ impl Replica {
     fn look(&self, touched: &Touched) -> Visibility {
         let plant = self.plant;
         Visibility {
-            nodes: touched.nodes.iter().map(|id| (*id, self.node_visible(*id))).collect(),
+            nodes: touched.nodes.iter().map(|id| (*id, self.node(*id).map(|node| node.holds_name()))).collect(),
             edges: touched.edges.iter().map(|key| (key.clone(), self.edge_visible(key))).collect(),
             attrs: touched
                 .attrs
@@ -1043,8 +1063,9 @@ impl Replica {
         let mut push = |change| events.push(ChangeEvent { change, origin });
         for (id, was) in &before.nodes {
             match (was, after.nodes[id]) {
-                (false, true) => push(Change::NodeInserted { id: *id }),
-                (true, false) => push(Change::NodeDeleted { id: *id }),
+                (None, Some(_)) => push(Change::NodeInserted { id: *id }),
+                (Some(_), None) => push(Change::NodeDeleted { id: *id }),
+                (Some(plain), Some(now)) if *plain != now => push(Change::NodeRenamed { id: *id }),
                 _ => {}
             }
         }
@@ -1063,7 +1084,7 @@ impl Replica {
                 }
                 (Some(_), None) => {
                     let still_visible = match element {
-                        Element::Node(id) => after.nodes.get(id).copied().unwrap_or(false),
+                        Element::Node(id) => after.nodes.get(id).is_some_and(Option::is_some),
                         Element::Edge(key) => after.edges.get(key).copied().unwrap_or(false),
                     };
                     if !still_visible {
@@ -1542,8 +1563,13 @@ impl<'a> NodeRef<'a> {
     /// concurrently with the same name holds it (the earliest stamp, then the lowest id, keeps the plain name).
     pub fn name(&self) -> Cow<'a, str> {
         let name = &self.core.value.name;
-        let holder = self.replica.names.get(name).and_then(|holders| holders.first()).map(|(_, id)| *id);
-        if holder == Some(self.id) { Cow::Borrowed(name.as_str()) } else { Cow::Owned(format!("{name}#{}", self.id)) }
+        if self.holds_name() { Cow::Borrowed(name.as_str()) } else { Cow::Owned(format!("{name}#{}", self.id)) }
+    }
+
+    /// Whether the node is shown under its plain inserted name (not `name#id`).
+    pub fn holds_name(&self) -> bool {
+        let holders = self.replica.names.get(&self.core.value.name);
+        holders.and_then(|holders| holders.first()).is_some_and(|(_, id)| *id == self.id)
     }
 
     /// The name as inserted.
