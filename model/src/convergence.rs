@@ -1,27 +1,53 @@
-//! The CRDT convergence model: N replicas holding real [`dsr::Replica`] values exchange real deltas over
-//! Stateright's networks, while the checker chooses every replica's operations.
+//! The CRDT convergence model: N replicas holding real [`dsr::Replica`] values exchange real encoded deltas over
+//! Stateright's networks, while the checker chooses every replica's operations, clock advances and anti-entropy.
 //!
-//! All replicas start from the same seed graph (nodes `x` and `y`, an edge `x -[in]-> y`, `level` attributes), so
-//! a small operation budget already reaches the interesting conflicts: concurrent writes of one attribute, a delete
-//! racing a write or an edge insert, an edge re-inserted while it is being deleted, two nodes inserted concurrently
-//! under the same name. `--ops K` is the total budget shared by all replicas (the checker decides who spends it).
+//! All replicas start from the same seed graph (nodes `x` and `y`, an edge `x -[in]-> y`, `level` attributes). The
+//! checker picks operations from a menu that reaches every conflict and the whole operation set: insert a node `n`
+//! with an attribute (two dots; every replica uses the same name, so concurrent inserts conflict and one shows as
+//! `n#id`), delete `x` or any inserted node (the delete removes incident edges), insert and delete `in` edges
+//! between the seed nodes and between two inserted nodes, insert an `RT` edge from `x` to an inserted node with its
+//! translation and rotation (three dots) and delete it, write and remove `level` on seed and inserted elements.
+//! `--ops K` is the total operation budget shared by all replicas (the checker decides who spends it). With
+//! `--ticks T` the checker may also advance a replica's physical clock (by [`TICK_NS`]), so clocks skew between
+//! replicas and hybrid-logical-clock stamps, not only counters, decide the winners; with `--syncs S` a replica may
+//! announce its applied operations to a peer, which answers with the deltas it lacks or, when its small history
+//! (`--history`) does not reach back far enough, a snapshot.
+//!
+//! Bytes on the wire: every delta and snapshot travels encoded ([`Delta::encode`], [`Replica::encode_snapshot`])
+//! and is decoded ([`Delta::decode`]) on delivery. A duplicating network also carries a truncated copy of every
+//! delta, which must be refused with the replica unchanged.
 //!
 //! Networks: unordered duplicating (every message may be delivered any number of times), unordered
 //! non-duplicating, and lossy (non-duplicating, and any message may be dropped). With loss, convergence is the job
 //! of anti-entropy: the quiescent-state properties first run reliable rounds of the replicas' own anti-entropy
 //! (`Replica::missing_for` and joins) and then require convergence.
 //!
-//! Symmetry reduction does not apply: replica ids break ties between concurrent writes, so replicas are not
-//! interchangeable.
+//! Properties on every state: the replica invariants; strong eventual consistency (replicas that applied the same
+//! operations show equal graphs and digests); each replica's state (store, causal context, applied operations,
+//! clock) and visible graph equal those of a fresh replica that joins the deltas of the operations it applied, in
+//! two orders, and that graph equals the reference specification's ([`crate::spec`]) for those operations; a fresh
+//! replica that installs a replica's snapshot equals it (the late join); every change event stream turns the
+//! previous visible graph into the current one; stamps follow causality; no delta is refused and no damaged one is
+//! accepted. The fresh replicas and the specification are computed once per set of deltas (a cache), since many
+//! states share one.
+//!
+//! Symmetry reduction does not apply: replica ids break ties between concurrent writes and name conflicts, so no
+//! permutation of replicas other than the identity preserves the behaviours.
 
 use std::borrow::Cow;
-use std::collections::{BTreeMap, BTreeSet};
-use std::sync::Arc;
+use std::collections::hash_map::DefaultHasher;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::hash::{Hash, Hasher};
+use std::sync::{Arc, Mutex};
 
-use dsr::{Delta, EdgeKey, Element, Missing, Name, NewNode, NodeId, OpError, Replica, ReplicaId, Value, attrs};
+use bytes::Bytes;
+use dsr::{
+    CausalContext, Change, ChangeEvent, Delta, EdgeKey, Element, Missing, Name, NewNode, NodeId, OpError, Replica,
+    ReplicaId, Value, VisibleGraph, attrs,
+};
 use serde::Serialize;
-use stateright::actor::{Actor, ActorModel, ActorModelState, Id, LossyNetwork, Network, Out};
-use stateright::{Expectation, Model};
+use stateright::actor::{Actor, ActorModel, ActorModelAction, ActorModelState, Id, LossyNetwork, Network, Out};
+use stateright::{Model, Property};
 
 use crate::report::{CheckOptions, CheckReport, run_check};
 use crate::spec::{self, OpId, OpKind, OpRecord};
@@ -30,7 +56,7 @@ use crate::spec::{self, OpId, OpKind, OpRecord};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum NetworkKind {
-    /// Unordered; every message may be delivered any number of times.
+    /// Unordered; every message may be delivered any number of times (and every delta has a truncated copy).
     UnorderedDuplicating,
     /// Unordered; every message is delivered at most once.
     UnorderedNonduplicating,
@@ -59,6 +85,13 @@ pub struct ConvergenceConfig {
     pub replicas: usize,
     /// Total operation budget, shared by all replicas.
     pub ops: usize,
+    /// Clock advances of [`TICK_NS`], shared by all replicas.
+    pub ticks: usize,
+    /// Anti-entropy announces (a replica's applied operations to one peer), shared by all replicas.
+    pub syncs: usize,
+    /// Deltas each replica keeps for anti-entropy (when there is loss or there are announces); a gap wider than
+    /// this is answered with a snapshot.
+    pub history: usize,
     /// The network.
     pub network: NetworkKind,
     /// A planted bug (with the `mutants` feature).
@@ -75,6 +108,9 @@ impl Default for ConvergenceConfig {
         ConvergenceConfig {
             replicas: 3,
             ops: 3,
+            ticks: 0,
+            syncs: 0,
+            history: 1,
             network: NetworkKind::UnorderedNonduplicating,
             mutant: None,
             #[cfg(feature = "mutants")]
@@ -91,12 +127,23 @@ impl ConvergenceConfig {
         self.planted = Some(mutant);
         self
     }
+
+    /// Whether replicas keep a history for anti-entropy.
+    fn keeps_history(&self) -> bool {
+        self.network == NetworkKind::Lossy || self.syncs > 0
+    }
 }
 
+/// How far one clock advance moves a replica's physical clock, ns (far past every stamp a few counters reach).
+pub const TICK_NS: u64 = 100;
 /// Replica id of the seed graph's author (not one of the modelled replicas).
 const SEED_REPLICA: ReplicaId = ReplicaId(1000);
 /// Name of the nodes the replicas may insert (the same for all, so concurrent inserts conflict).
 const NEW_NODE_NAME: &str = "n";
+/// Type of the edges between plain nodes.
+const IN: &str = "in";
+/// Type of the transform edges.
+const RT: &str = "RT";
 
 /// The seed graph every replica starts from, with the operations that built it.
 #[derive(Clone, Debug)]
@@ -136,7 +183,7 @@ impl Seed {
         };
         let x = node(&mut replica, "x", &mut ops);
         let y = node(&mut replica, "y", &mut ops);
-        let (key, delta) = replica.insert_edge(0, x, y, "in", vec![("level".into(), Value::I32(0))]).unwrap();
+        let (key, delta) = replica.insert_edge(0, x, y, IN, vec![("level".into(), Value::I32(0))]).unwrap();
         record(&replica, &delta, OpKind::InsertEdge { key, attrs: level(0) }, &mut ops);
         Seed { snapshot: Arc::new(replica.snapshot()), ops, x, y }
     }
@@ -145,54 +192,99 @@ impl Seed {
 /// An operation the checker may choose for a replica.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum OpChoice {
-    /// Insert a node named `n`.
+    /// Insert a node named `n` with a `level` attribute (two dots).
     InsertNode,
-    /// Delete a node.
+    /// Delete a node (and, with it, its incident edges).
     DeleteNode(NodeId),
     /// Insert an edge `from -[in]-> to`.
     InsertEdge(NodeId, NodeId),
-    /// Delete an edge `from -[in]-> to`.
-    DeleteEdge(NodeId, NodeId),
+    /// Insert an edge `from -[RT]-> to` with a translation and a rotation (three dots).
+    InsertRt(NodeId, NodeId),
+    /// Delete an edge.
+    DeleteEdge(EdgeKey),
     /// Write the `level` attribute of a node or edge.
     SetLevel(Element),
     /// Remove the `level` attribute of a node or edge.
     RemoveLevel(Element),
 }
 
-/// A delta on the wire, with the operation it carries (its identity: one operation, one delta).
-#[derive(Clone)]
-pub struct DeltaMsg {
-    /// The operation.
-    pub op: Arc<OpRecord>,
-    /// Its delta.
-    pub delta: Arc<Delta>,
+/// What the checker may choose for a replica.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Choice {
+    /// A local operation.
+    Op(OpChoice),
+    /// Advance the replica's physical clock by [`TICK_NS`].
+    Tick,
+    /// Announce the replica's applied operations to the peer with this index.
+    Announce(usize),
 }
 
-impl PartialEq for DeltaMsg {
-    fn eq(&self, other: &Self) -> bool {
-        self.op.id == other.op.id
-    }
+/// A message on the wire. Deltas and snapshots travel as their encoded bytes; the operation ids beside them are
+/// the model's bookkeeping (which operations a replica has applied), never read by a replica.
+#[derive(Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Msg {
+    /// The delta of one operation (first sent, or re-sent by anti-entropy).
+    Delta {
+        /// The operation.
+        op: OpId,
+        /// [`Delta::encode`]'s bytes.
+        bytes: Bytes,
+    },
+    /// A truncated copy of a delta (duplicating network only): must be refused.
+    Damaged {
+        /// The operation of the intact delta.
+        op: OpId,
+        /// A strict prefix of its bytes.
+        bytes: Bytes,
+    },
+    /// Anti-entropy: the sender's applied operations.
+    Announce {
+        /// [`Replica::applied`] of the sender, as its dots.
+        applied: Vec<dsr::Dot>,
+        /// The operations the sender had applied.
+        seen: BTreeSet<OpId>,
+    },
+    /// Anti-entropy: the answerer's whole state.
+    Snapshot {
+        /// The operations the answerer had applied.
+        seen: BTreeSet<OpId>,
+        /// [`Replica::encode_snapshot`]'s bytes.
+        bytes: Bytes,
+    },
 }
-impl Eq for DeltaMsg {}
-impl PartialOrd for DeltaMsg {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for DeltaMsg {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.op.id.cmp(&other.op.id)
-    }
-}
-impl std::hash::Hash for DeltaMsg {
-    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
-        self.op.id.hash(state);
-    }
-}
-impl std::fmt::Debug for DeltaMsg {
+
+impl std::fmt::Debug for Msg {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "delta of ({})", self.op)
+        match self {
+            Msg::Delta { op, bytes } => write!(f, "delta of op {op} ({} bytes)", bytes.len()),
+            Msg::Damaged { op, bytes } => write!(f, "TRUNCATED delta of op {op} ({} bytes)", bytes.len()),
+            Msg::Announce { seen, .. } => write!(f, "announce of {} applied ops", seen.len()),
+            Msg::Snapshot { seen, bytes } => write!(f, "snapshot of {} ops ({} bytes)", seen.len(), bytes.len()),
+        }
     }
+}
+
+/// An operation a replica issued, with its delta's bytes.
+#[derive(Clone, PartialEq, Eq, Hash)]
+pub struct Issued {
+    /// The operation.
+    pub record: Arc<OpRecord>,
+    /// [`Delta::encode`] of its delta.
+    pub bytes: Bytes,
+}
+
+/// A value the model keeps beside its state but out of its identity (it follows from the hashed fields).
+#[derive(Clone, Debug, Default)]
+pub struct Derived<T>(pub T);
+
+impl<T> PartialEq for Derived<T> {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+impl<T> Eq for Derived<T> {}
+impl<T> Hash for Derived<T> {
+    fn hash<H: Hasher>(&self, _: &mut H) {}
 }
 
 /// One replica's state in the model.
@@ -200,20 +292,32 @@ impl std::fmt::Debug for DeltaMsg {
 pub struct ReplicaState {
     /// The real replica.
     pub replica: Replica,
+    /// The physical clock the replica's operations read, ns.
+    pub now_ns: u64,
     /// The operations this replica issued.
-    pub issued: Vec<Arc<OpRecord>>,
+    pub issued: Vec<Issued>,
     /// The operations whose deltas this replica has applied (its own included).
     pub seen: BTreeSet<OpId>,
     /// Operations issued so far.
     pub ops_done: u8,
-    /// Deltas the replica refused (there should be none).
+    /// Clock advances so far.
+    pub ticks_done: u8,
+    /// Announces sent so far.
+    pub syncs_done: u8,
+    /// Deltas and snapshots the replica refused (there should be none).
     pub refused: Vec<String>,
+    /// Damaged deltas the replica accepted, or that changed it although refused (there should be none).
+    pub damaged_accepted: Vec<String>,
+    /// Steps whose change events did not turn the previous visible graph into the new one (there should be none).
+    pub events_incomplete: Vec<String>,
+    /// The replica's visible graph (a function of the replica).
+    pub graph: Derived<Arc<VisibleGraph>>,
 }
 
 impl std::fmt::Debug for ReplicaState {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let graph = self.replica.visible_graph();
-        writeln!(f, "replica {} (digest {}):", self.replica.id(), self.replica.digest())?;
+        let graph = &self.graph.0;
+        writeln!(f, "replica {} (digest {}, clock {}):", self.replica.id(), graph.digest(), self.replica.clock().0)?;
         for (id, node) in &graph.nodes {
             let attrs: Vec<String> = node.attrs.iter().map(|(n, a)| format!("{n}={:?}", a.concurrent)).collect();
             writeln!(f, "  node {id} {:?} {}", node.name, attrs.join(" "))?;
@@ -223,13 +327,100 @@ impl std::fmt::Debug for ReplicaState {
             writeln!(f, "  edge {key} {}", attrs.join(" "))?;
         }
         for op in &self.issued {
-            writeln!(f, "  issued: {op}")?;
+            writeln!(f, "  issued: {}", op.record)?;
         }
-        for refusal in &self.refused {
-            writeln!(f, "  REFUSED: {refusal}")?;
+        let seen: Vec<String> = self.seen.iter().map(|op| op.to_string()).collect();
+        writeln!(f, "  applied ops: {}", seen.join(" "))?;
+        for finding in self.refused.iter().chain(&self.damaged_accepted).chain(&self.events_incomplete) {
+            writeln!(f, "  FINDING: {finding}")?;
         }
         Ok(())
     }
+}
+
+impl ReplicaState {
+    /// After the replica changed: checks that the change events it queued turn the previous visible graph into
+    /// the new one, and keeps the new one.
+    fn after_step(&mut self, step: impl FnOnce() -> String) {
+        let events = self.replica.drain_changes();
+        let graph = Arc::new(self.replica.visible_graph());
+        if let Err(why) = check_change_events(&self.graph.0, &graph, &events) {
+            self.events_incomplete.push(format!("{}: {why}", step()));
+        }
+        self.graph = Derived(graph);
+    }
+}
+
+/// Whether two graphs agree on what change events promise to keep a reader up to date with: the nodes with their
+/// types, shown names and winning attribute values, the edges with their winning attribute values.
+fn same_winners(a: &VisibleGraph, b: &VisibleGraph) -> bool {
+    let same_attrs = |a: &BTreeMap<Name, dsr::VisibleAttr>, b: &BTreeMap<Name, dsr::VisibleAttr>| {
+        a.len() == b.len() && a.iter().zip(b).all(|((n1, a1), (n2, a2))| n1 == n2 && a1.value == a2.value)
+    };
+    a.nodes.len() == b.nodes.len()
+        && a.edges.len() == b.edges.len()
+        && a.nodes.iter().zip(&b.nodes).all(|((i1, n1), (i2, n2))| {
+            i1 == i2 && n1.node_type == n2.node_type && n1.name == n2.name && same_attrs(&n1.attrs, &n2.attrs)
+        })
+        && a.edges.iter().zip(&b.edges).all(|((k1, a1), (k2, a2))| k1 == k2 && same_attrs(a1, a2))
+}
+
+/// Applies `events` in order to `before`, taking the values they announce from `after`, and compares the result
+/// with `after` (winners only: events report winning values).
+fn check_change_events(before: &VisibleGraph, after: &VisibleGraph, events: &[ChangeEvent]) -> Result<(), String> {
+    let mut graph = before.clone();
+    for event in events {
+        match &event.change {
+            Change::NodeInserted { id } => {
+                let node = after.nodes.get(id).ok_or_else(|| format!("{:?} for an invisible node", event.change))?;
+                let mut node = node.clone();
+                node.attrs.clear();
+                graph.nodes.insert(*id, node);
+            }
+            Change::NodeDeleted { id } => {
+                graph.nodes.remove(id);
+            }
+            Change::NodeRenamed { id } => {
+                let now = after.nodes.get(id).ok_or_else(|| format!("{:?} for an invisible node", event.change))?;
+                let node = graph.nodes.get_mut(id).ok_or_else(|| format!("{:?} before it appeared", event.change))?;
+                node.name.clone_from(&now.name);
+            }
+            Change::EdgeInserted { key } => {
+                graph.edges.insert(key.clone(), BTreeMap::new());
+            }
+            Change::EdgeDeleted { key } => {
+                graph.edges.remove(key);
+            }
+            Change::AttrUpdated { element, name } => {
+                let value = match element {
+                    Element::Node(id) => after.nodes.get(id).and_then(|n| n.attrs.get(name)),
+                    Element::Edge(key) => after.edges.get(key).and_then(|a| a.get(name)),
+                };
+                let value = value.ok_or_else(|| format!("{:?} for an attribute not shown", event.change))?;
+                let target = match element {
+                    Element::Node(id) => graph.nodes.get_mut(id).map(|n| &mut n.attrs),
+                    Element::Edge(key) => graph.edges.get_mut(key),
+                };
+                target
+                    .ok_or_else(|| format!("{:?} before its element appeared", event.change))?
+                    .insert(name.clone(), value.clone());
+            }
+            Change::AttrRemoved { element, name } => {
+                let target = match element {
+                    Element::Node(id) => graph.nodes.get_mut(id).map(|n| &mut n.attrs),
+                    Element::Edge(key) => graph.edges.get_mut(key),
+                };
+                if let Some(attrs) = target {
+                    attrs.remove(name);
+                }
+            }
+        }
+    }
+    if same_winners(&graph, after) {
+        return Ok(());
+    }
+    let kinds: Vec<String> = events.iter().map(|e| format!("{:?}", e.change)).collect();
+    Err(format!("events [{}] leave {graph:?}, the replica shows {after:?}", kinds.join(", ")))
 }
 
 /// One modelled replica.
@@ -238,9 +429,7 @@ pub struct ReplicaActor {
     index: usize,
     peers: Vec<Id>,
     seed: Seed,
-    keep_history: bool,
-    #[cfg(feature = "mutants")]
-    planted: Option<dsr::DsrMutant>,
+    config: ConvergenceConfig,
 }
 
 impl ReplicaActor {
@@ -248,29 +437,43 @@ impl ReplicaActor {
         ReplicaId(self.index as u32 + 1)
     }
 
-    /// The operations this replica may perform now (only ones its replica accepts).
-    fn menu(&self, state: &ReplicaState) -> Vec<OpChoice> {
+    /// The operations this replica may perform now (only ones its replica accepts), its clock advance and its
+    /// announces.
+    fn menu(&self, state: &ReplicaState) -> Vec<Choice> {
         let r = &state.replica;
         let (x, y) = (self.seed.x, self.seed.y);
         let mut menu = Vec::new();
+        let inserted: Vec<NodeId> =
+            r.nodes().filter(|node| node.inserted_name() == NEW_NODE_NAME).map(|node| node.id()).collect();
         if r.node_by_name(NEW_NODE_NAME).is_none() {
             menu.push(OpChoice::InsertNode);
         }
-        for id in [x, y] {
+        for &id in std::iter::once(&x).chain(&inserted) {
             if r.node(id).is_some() {
                 menu.push(OpChoice::DeleteNode(id));
             }
         }
-        for (from, to) in [(x, y), (y, x)] {
-            let key = EdgeKey::new(from, to, "in");
+        let edge = |from: NodeId, to: NodeId, edge_type: &str, menu: &mut Vec<OpChoice>| {
+            let key = EdgeKey::new(from, to, edge_type);
             if r.edge(&key).is_some() {
-                menu.push(OpChoice::DeleteEdge(from, to));
+                menu.push(OpChoice::DeleteEdge(key));
             } else if r.node(from).is_some() && r.node(to).is_some() {
-                menu.push(OpChoice::InsertEdge(from, to));
+                menu.push(if edge_type == RT { OpChoice::InsertRt(from, to) } else { OpChoice::InsertEdge(from, to) });
             }
+        };
+        edge(x, y, IN, &mut menu);
+        edge(y, x, IN, &mut menu);
+        for &id in &inserted {
+            edge(x, id, RT, &mut menu);
         }
-        let x_to_y = Element::Edge(EdgeKey::new(x, y, "in"));
-        for element in [Element::Node(x), x_to_y] {
+        if let [first, second, ..] = inserted[..] {
+            edge(first, second, IN, &mut menu);
+        }
+        let x_to_y = Element::Edge(EdgeKey::new(x, y, IN));
+        for (element, removable) in [(Element::Node(x), true), (x_to_y, true)]
+            .into_iter()
+            .chain(inserted.iter().map(|&id| (Element::Node(id), false)))
+        {
             let has_level = match &element {
                 Element::Node(id) => r.node(*id).map(|n| n.attr("level").is_some()),
                 Element::Edge(key) => r.edge(key).map(|e| e.attr("level").is_some()),
@@ -278,120 +481,327 @@ impl ReplicaActor {
             match has_level {
                 Some(true) => {
                     menu.push(OpChoice::SetLevel(element.clone()));
-                    menu.push(OpChoice::RemoveLevel(element));
+                    if removable {
+                        menu.push(OpChoice::RemoveLevel(element));
+                    }
                 }
                 Some(false) => menu.push(OpChoice::SetLevel(element)),
                 None => {}
             }
         }
-        menu
+        let mut choices: Vec<Choice> = menu.into_iter().map(Choice::Op).collect();
+        if self.config.ticks > 0 {
+            choices.push(Choice::Tick);
+        }
+        if self.config.syncs > 0 {
+            choices.extend((0..self.config.replicas).filter(|&peer| peer != self.index).map(Choice::Announce));
+        }
+        choices
     }
 
     fn offer(&self, state: &ReplicaState, o: &mut Out<Self>) {
-        o.choose_random("op", self.menu(state));
+        o.choose_random("choice", self.menu(state));
     }
 
     /// Performs a chosen operation on the real replica.
     fn perform(&self, state: &mut ReplicaState, choice: &OpChoice) -> Result<(Arc<Delta>, OpKind), OpError> {
+        let now = state.now_ns;
         let r = &mut state.replica;
         let level = Value::I32((self.index as i32 + 1) * 10 + i32::from(state.ops_done) + 1);
         let name = || Name::new("level");
         Ok(match choice {
             OpChoice::InsertNode => {
-                let (id, delta) = r.insert_node(0, NewNode::new("object", NEW_NODE_NAME))?;
+                let new = NewNode::new("object", NEW_NODE_NAME).with_attr("level", level.clone());
+                let (id, delta) = r.insert_node(now, new)?;
                 let kind = OpKind::InsertNode {
                     id,
                     node_type: Name::new("object"),
                     name: Name::new(NEW_NODE_NAME),
-                    attrs: Vec::new(),
+                    attrs: vec![(name(), level)],
                 };
                 (delta, kind)
             }
-            OpChoice::DeleteNode(id) => (r.delete_node(0, *id)?, OpKind::DeleteNode { id: *id }),
+            OpChoice::DeleteNode(id) => (r.delete_node(now, *id)?, OpKind::DeleteNode { id: *id }),
             OpChoice::InsertEdge(from, to) => {
-                let (key, delta) = r.insert_edge(0, *from, *to, "in", vec![])?;
+                let (key, delta) = r.insert_edge(now, *from, *to, IN, vec![])?;
                 (delta, OpKind::InsertEdge { key, attrs: Vec::new() })
             }
-            OpChoice::DeleteEdge(from, to) => {
-                let key = EdgeKey::new(*from, *to, "in");
-                (r.delete_edge(0, &key)?, OpKind::DeleteEdge { key })
+            OpChoice::InsertRt(from, to) => {
+                let translation = Value::from(vec![(self.index as f32 + 1.0) * 100.0, 0.0, 0.0]);
+                let rotation = Value::from(vec![0.0f32, 0.0, 0.5]);
+                let attrs = vec![
+                    (attrs::RT_TRANSLATION.name().to_owned(), translation.clone()),
+                    (attrs::RT_ROTATION_EULER_XYZ.name().to_owned(), rotation.clone()),
+                ];
+                let (key, delta) = r.insert_edge(now, *from, *to, RT, attrs)?;
+                let attrs = vec![
+                    (Name::new(attrs::RT_TRANSLATION.name()), translation),
+                    (Name::new(attrs::RT_ROTATION_EULER_XYZ.name()), rotation),
+                ];
+                (delta, OpKind::InsertEdge { key, attrs })
             }
+            OpChoice::DeleteEdge(key) => (r.delete_edge(now, key)?, OpKind::DeleteEdge { key: key.clone() }),
             OpChoice::SetLevel(element) => {
-                let delta = r.set_attrs(0, element.clone(), [(attrs::LEVEL.name(), level.clone())])?;
+                let delta = r.set_attrs(now, element.clone(), [(attrs::LEVEL.name(), level.clone())])?;
                 (delta, OpKind::SetAttr { element: element.clone(), name: name(), value: level })
             }
             OpChoice::RemoveLevel(element) => (
-                r.remove_attr(0, element.clone(), "level")?,
+                r.remove_attr(now, element.clone(), "level")?,
                 OpKind::RemoveAttr { element: element.clone(), name: name() },
             ),
         })
     }
+
+    /// Sends a delta to `to` (and, on a duplicating network, a truncated copy of it).
+    fn send_delta(&self, to: Id, op: OpId, bytes: &Bytes, o: &mut Out<Self>) {
+        o.send(to, Msg::Delta { op, bytes: bytes.clone() });
+        if self.config.network == NetworkKind::UnorderedDuplicating {
+            // Cut at one of three places, varying with the operation, so every part of the format is cut somewhere.
+            let cut = bytes.len() * (1 + (op.counter % 3) as usize) / 4;
+            o.send(to, Msg::Damaged { op, bytes: bytes.slice(..cut.min(bytes.len() - 1)) });
+        }
+    }
+
+    fn operate(&self, state: &mut ReplicaState, choice: &OpChoice, o: &mut Out<Self>) {
+        let past = state.seen.clone();
+        let Ok((delta, kind)) = self.perform(state, choice) else { return };
+        let origin = delta.origin().expect("local deltas have an origin");
+        let op = Arc::new(OpRecord {
+            id: dsr::Dot::new(origin.replica, origin.first),
+            replica: origin.replica,
+            stamp: state.replica.clock(),
+            past,
+            kind,
+        });
+        state.after_step(|| format!("local operation {op}"));
+        let bytes = Bytes::from(delta.encode());
+        state.seen.insert(op.id);
+        state.ops_done += 1;
+        for &peer in &self.peers {
+            self.send_delta(peer, op.id, &bytes, o);
+        }
+        state.issued.push(Issued { record: op, bytes });
+    }
+
+    /// Joins received bytes (a delta or a snapshot); returns whether they were accepted.
+    fn join_bytes(&self, state: &mut ReplicaState, what: &str, bytes: &[u8]) -> bool {
+        let result = Delta::decode(bytes)
+            .map_err(|e| e.to_string())
+            .and_then(|delta| state.replica.apply_shared(Arc::new(delta)).map_err(|e| e.to_string()));
+        match result {
+            Ok(()) => {
+                state.after_step(|| format!("joining {what}"));
+                true
+            }
+            Err(error) => {
+                state.refused.push(format!("{what}: {error}"));
+                false
+            }
+        }
+    }
 }
 
 impl Actor for ReplicaActor {
-    type Msg = DeltaMsg;
+    type Msg = Msg;
     type State = ReplicaState;
     type Timer = ();
-    type Random = OpChoice;
+    type Random = Choice;
     type Storage = ();
 
     fn on_start(&self, _id: Id, _storage: &Option<()>, o: &mut Out<Self>) -> ReplicaState {
         let mut replica = Replica::new(self.replica_id());
-        if !self.keep_history {
-            // Without loss nothing is ever re-sent, so the history would only multiply states.
-            replica.set_log_limits(dsr::LogLimits { max_deltas: 0, max_payload_bytes: 0 });
-        }
+        let max_deltas = if self.config.keeps_history() { self.config.history } else { 0 };
+        // Without loss or announces nothing is ever re-sent, so the history would only multiply states.
+        replica.set_log_limits(dsr::LogLimits { max_deltas, max_payload_bytes: 1 << 20 });
         #[cfg(feature = "mutants")]
-        replica.plant_mutant(self.planted);
+        replica.plant_mutant(self.config.planted);
         replica.apply(&self.seed.snapshot).expect("the seed graph applies");
+        replica.set_change_tracking(true);
+        let graph = Arc::new(replica.visible_graph());
         let state = ReplicaState {
             replica,
+            now_ns: 0,
             issued: Vec::new(),
             seen: self.seed.ops.iter().map(|op| op.id).collect(),
             ops_done: 0,
+            ticks_done: 0,
+            syncs_done: 0,
             refused: Vec::new(),
+            damaged_accepted: Vec::new(),
+            events_incomplete: Vec::new(),
+            graph: Derived(graph),
         };
         self.offer(&state, o);
         state
     }
 
-    fn on_random(&self, _id: Id, state: &mut Cow<'_, ReplicaState>, choice: &OpChoice, o: &mut Out<Self>) {
+    fn on_random(&self, _id: Id, state: &mut Cow<'_, ReplicaState>, choice: &Choice, o: &mut Out<Self>) {
         let state = state.to_mut();
-        let past = state.seen.clone();
-        if let Ok((delta, kind)) = self.perform(state, choice) {
-            let origin = delta.origin().expect("local deltas have an origin");
-            let op = Arc::new(OpRecord {
-                id: dsr::Dot::new(origin.replica, origin.first),
-                replica: origin.replica,
-                stamp: state.replica.clock(),
-                past,
-                kind,
-            });
-            state.seen.insert(op.id);
-            state.issued.push(Arc::clone(&op));
-            state.ops_done += 1;
-            o.broadcast(&self.peers, &DeltaMsg { op, delta });
+        match choice {
+            Choice::Op(op) => self.operate(state, op, o),
+            Choice::Tick => {
+                state.now_ns += TICK_NS;
+                state.ticks_done += 1;
+            }
+            Choice::Announce(peer) => {
+                state.syncs_done += 1;
+                let applied = state.replica.applied().dots().collect();
+                o.send(Id::from(*peer), Msg::Announce { applied, seen: state.seen.clone() });
+            }
         }
         self.offer(state, o);
     }
 
-    fn on_msg(&self, _id: Id, state: &mut Cow<'_, ReplicaState>, _src: Id, msg: DeltaMsg, o: &mut Out<Self>) {
-        let state = state.to_mut();
-        if let Err(error) = state.replica.apply_shared(Arc::clone(&msg.delta)) {
-            state.refused.push(format!("{}: {error}", msg.op));
+    fn on_msg(&self, _id: Id, state: &mut Cow<'_, ReplicaState>, src: Id, msg: Msg, o: &mut Out<Self>) {
+        match msg {
+            Msg::Delta { op, bytes } => {
+                let state = state.to_mut();
+                if self.join_bytes(state, &format!("delta of op {op}"), &bytes) {
+                    state.seen.insert(op);
+                }
+                self.offer(state, o);
+            }
+            Msg::Damaged { op, bytes } => {
+                // Refused by the decoder: nothing changes (and the state is not even copied).
+                let Ok(delta) = Delta::decode(&bytes) else { return };
+                let state = state.to_mut();
+                let before = state.replica.clone();
+                let finding = match state.replica.apply(&delta) {
+                    Ok(()) => format!("a truncated copy of op {op} ({} bytes) was decoded and joined", bytes.len()),
+                    Err(_) if state.replica != before => format!("a refused truncated copy of op {op} changed it"),
+                    Err(_) => return,
+                };
+                state.damaged_accepted.push(finding);
+                state.after_step(|| format!("truncated copy of op {op}"));
+            }
+            Msg::Announce { applied, .. } => match state.replica.missing_for(&CausalContext::from_dots(applied)) {
+                Missing::UpToDate => {}
+                Missing::Deltas(deltas) => {
+                    for delta in deltas {
+                        let origin = delta.origin().expect("retained deltas have an origin");
+                        let op = dsr::Dot::new(origin.replica, origin.first);
+                        o.send(src, Msg::Delta { op, bytes: Bytes::from(delta.encode()) });
+                    }
+                }
+                Missing::Snapshot => {
+                    let bytes = Bytes::from(state.replica.encode_snapshot());
+                    o.send(src, Msg::Snapshot { seen: state.seen.clone(), bytes });
+                }
+            },
+            Msg::Snapshot { seen, bytes } => {
+                let state = state.to_mut();
+                if self.join_bytes(state, "snapshot", &bytes) {
+                    state.seen.extend(seen);
+                }
+                self.offer(state, o);
+            }
         }
-        state.seen.insert(msg.op.id);
-        self.offer(state, o);
     }
 }
 
-/// What the properties need besides the state: the configuration and the seed.
+/// What a fresh replica that joins a set of deltas looks like, and whether the specification agrees.
+#[derive(Debug)]
+struct Oracle {
+    /// Fingerprint of the fresh replica's replicated state (see [`crdt_fingerprint`]).
+    fingerprint: u64,
+    /// Its visible graph.
+    graph: VisibleGraph,
+    /// A delta refused, or the two join orders disagreeing.
+    join_problem: Option<String>,
+    /// The specification disagreeing (checked when the operations are causally closed).
+    spec_problem: Option<String>,
+}
+
+/// Fresh replicas computed so far, by the deltas joined (many states share a set of deltas).
+#[derive(Default)]
+struct OracleCache {
+    by_deltas: Mutex<HashMap<Vec<Bytes>, Arc<Oracle>>>,
+    /// Late-join checks done, by the fingerprint of the replica whose snapshot was installed.
+    installs: Mutex<HashMap<u64, Option<String>>>,
+}
+
+/// Most entries kept in each cache before it is emptied (a bound on memory, not on correctness).
+const CACHE_LIMIT: usize = 1 << 18;
+
+impl std::fmt::Debug for OracleCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("OracleCache")
+    }
+}
+
+/// A fingerprint of what a replica replicates: its store, causal context, applied operations and clock.
+fn crdt_fingerprint(replica: &Replica) -> u64 {
+    let mut hasher = DefaultHasher::new();
+    replica.store().hash(&mut hasher);
+    replica.context().hash(&mut hasher);
+    replica.applied().hash(&mut hasher);
+    replica.clock().hash(&mut hasher);
+    hasher.finish()
+}
+
+/// What the properties need besides the state: the configuration, the seed and the caches.
 #[derive(Clone, Debug)]
 pub struct Setup {
     /// The configuration.
     pub config: ConvergenceConfig,
     /// The seed graph.
     pub seed: Seed,
+    cache: Arc<OracleCache>,
+}
+
+impl Setup {
+    /// The oracle for the operations `seen` (their deltas found among the issued ones).
+    fn oracle(&self, state: &State, seen: &BTreeSet<OpId>) -> Arc<Oracle> {
+        let issued: Vec<&Issued> = state
+            .actor_states
+            .iter()
+            .flat_map(|s| s.issued.iter())
+            .filter(|issued| seen.contains(&issued.record.id))
+            .collect();
+        let key: Vec<Bytes> = issued.iter().map(|issued| issued.bytes.clone()).collect();
+        if let Some(found) = self.cache.by_deltas.lock().expect("cache lock").get(&key) {
+            return Arc::clone(found);
+        }
+        let oracle = Arc::new(self.compute_oracle(&issued));
+        let mut cache = self.cache.by_deltas.lock().expect("cache lock");
+        if cache.len() >= CACHE_LIMIT {
+            cache.clear();
+        }
+        cache.insert(key, Arc::clone(&oracle));
+        oracle
+    }
+
+    fn compute_oracle(&self, issued: &[&Issued]) -> Oracle {
+        let join = |order: &mut dyn Iterator<Item = &&Issued>| -> Result<Replica, String> {
+            let mut fresh = Replica::new(ReplicaId(999));
+            fresh.apply(&self.seed.snapshot).expect("the seed graph applies");
+            for issued in order {
+                let delta = Delta::decode(&issued.bytes).map_err(|e| format!("{}: {e}", issued.record))?;
+                fresh.apply(&delta).map_err(|e| format!("{}: {e}", issued.record))?;
+            }
+            Ok(fresh)
+        };
+        let (forward, backward) = match (join(&mut issued.iter()), join(&mut issued.iter().rev())) {
+            (Ok(forward), Ok(backward)) => (forward, backward),
+            (Err(error), _) | (_, Err(error)) => {
+                let join_problem = Some(format!("a fresh replica refuses a delta: {error}"));
+                return Oracle { fingerprint: 0, graph: VisibleGraph::default(), join_problem, spec_problem: None };
+            }
+        };
+        let fingerprint = crdt_fingerprint(&forward);
+        let graph = forward.visible_graph();
+        let join_problem = (crdt_fingerprint(&backward) != fingerprint || backward.visible_graph() != graph)
+            .then(|| "joining the deltas in reverse order gives another state".to_owned());
+        let ops: Vec<OpRecord> =
+            self.seed.ops.iter().map(|op| (**op).clone()).chain(issued.iter().map(|i| (*i.record).clone())).collect();
+        let ids: BTreeSet<OpId> = ops.iter().map(|op| op.id).collect();
+        let closed = ops.iter().all(|op| op.past.is_subset(&ids));
+        let spec_problem = closed
+            .then(|| spec::visible_graph(&ops))
+            .filter(|expected| *expected != graph)
+            .map(|expected| format!("the specification shows {expected:?}"));
+        Oracle { fingerprint, graph, join_problem, spec_problem }
+    }
 }
 
 type State = ActorModelState<ReplicaActor>;
@@ -403,22 +813,32 @@ fn all_ops(setup: &Setup, state: &State) -> Vec<OpRecord> {
 
 /// Every operation issued so far, by reference.
 fn issued_ops<'a>(setup: &'a Setup, state: &'a State) -> impl Iterator<Item = &'a OpRecord> + 'a {
-    setup.seed.ops.iter().map(|op| &**op).chain(state.actor_states.iter().flat_map(|s| s.issued.iter().map(|op| &**op)))
+    setup
+        .seed
+        .ops
+        .iter()
+        .map(|op| &**op)
+        .chain(state.actor_states.iter().flat_map(|s| s.issued.iter().map(|op| &*op.record)))
 }
 
-fn ops_spent(setup: &Setup, state: &State) -> bool {
-    state.actor_states.iter().map(|s| usize::from(s.ops_done)).sum::<usize>() == setup.config.ops
+/// Whether the operation budget is spent (clock advances and announces may be left).
+fn budgets_spent(setup: &Setup, state: &State) -> bool {
+    spent(state).0 == setup.config.ops
 }
 
-/// Nothing is left to deliver: the network is empty, or (duplicating) every message reached its destination.
-fn quiescent(setup: &Setup, state: &State) -> bool {
-    match setup.config.network {
-        NetworkKind::UnorderedDuplicating => state
-            .network
-            .iter_all()
-            .all(|envelope| state.actor_states[usize::from(envelope.dst)].seen.contains(&envelope.msg.op.id)),
-        NetworkKind::UnorderedNonduplicating | NetworkKind::Lossy => state.network.len() == 0,
-    }
+/// Nothing is left to deliver that would change anything: every delta's operation and every snapshot's operations
+/// were applied by the destination, and every announce came from a replica that had applied everything its
+/// destination had (truncated copies change nothing).
+fn quiescent(state: &State) -> bool {
+    state.network.iter_all().all(|envelope| {
+        let dst = &state.actor_states[usize::from(envelope.dst)];
+        match &envelope.msg {
+            Msg::Delta { op, .. } => dst.seen.contains(op),
+            Msg::Damaged { .. } => true,
+            Msg::Announce { seen, .. } => dst.seen.is_subset(seen),
+            Msg::Snapshot { seen, .. } => seen.is_subset(&dst.seen),
+        }
+    })
 }
 
 /// The replicas as they are, or (lossy network) after reliable rounds of their own anti-entropy.
@@ -432,17 +852,19 @@ fn settled_replicas(setup: &Setup, state: &State) -> Vec<Replica> {
                         continue;
                     }
                     let missing = replicas[from].missing_for(replicas[to].applied());
-                    let snapshot = matches!(missing, Missing::Snapshot).then(|| replicas[from].snapshot());
+                    let snapshot = matches!(missing, Missing::Snapshot).then(|| replicas[from].encode_snapshot());
                     let target = &mut replicas[to];
                     match missing {
                         Missing::UpToDate => {}
                         Missing::Deltas(deltas) => {
                             for delta in deltas {
-                                let _ = target.apply_shared(delta);
+                                if let Ok(delta) = Delta::decode(&delta.encode()) {
+                                    let _ = target.apply(&delta);
+                                }
                             }
                         }
                         Missing::Snapshot => {
-                            if let Some(snapshot) = snapshot {
+                            if let Some(Ok(snapshot)) = snapshot.map(|bytes| Delta::decode(&bytes)) {
                                 let _ = target.apply(&snapshot);
                             }
                         }
@@ -454,8 +876,8 @@ fn settled_replicas(setup: &Setup, state: &State) -> Vec<Replica> {
     replicas
 }
 
-fn invariants_hold(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {
-    let deleted: Vec<(OpId, NodeId)> = issued_ops(&model.cfg, state)
+fn invariants_hold(model: &ConvergenceModel, state: &State) -> bool {
+    let deleted: Vec<(OpId, NodeId)> = issued_ops(&model.inner.cfg, state)
         .filter_map(|op| match op.kind {
             OpKind::DeleteNode { id } => Some((op.id, id)),
             _ => None,
@@ -467,39 +889,113 @@ fn invariants_hold(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> bo
     })
 }
 
-fn no_delta_refused(_: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {
+fn no_delta_refused(_: &ConvergenceModel, state: &State) -> bool {
     state.actor_states.iter().all(|s| s.refused.is_empty())
 }
 
-fn stamps_follow_causality(_: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {
+fn damaged_refused(_: &ConvergenceModel, state: &State) -> bool {
+    state.actor_states.iter().all(|s| s.damaged_accepted.is_empty())
+}
+
+fn change_events_complete(_: &ConvergenceModel, state: &State) -> bool {
+    state.actor_states.iter().all(|s| s.events_incomplete.is_empty())
+}
+
+fn stamps_follow_causality(_: &ConvergenceModel, state: &State) -> bool {
     // Each replica's own operations, with every operation it had seen: those are the pairs a stamp must order.
     let stamps: BTreeMap<OpId, dsr::Stamp> =
-        state.actor_states.iter().flat_map(|s| s.issued.iter().map(|op| (op.id, op.stamp))).collect();
+        state.actor_states.iter().flat_map(|s| s.issued.iter().map(|op| (op.record.id, op.record.stamp))).collect();
     state
         .actor_states
         .iter()
         .flat_map(|s| s.issued.iter())
-        .all(|op| op.past.iter().all(|earlier| stamps.get(earlier).is_none_or(|stamp| *stamp < op.stamp)))
+        .all(|op| op.record.past.iter().all(|earlier| stamps.get(earlier).is_none_or(|stamp| *stamp < op.record.stamp)))
 }
 
-fn quiescent_replicas_converge(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {
-    if !(ops_spent(&model.cfg, state) && quiescent(&model.cfg, state)) {
+fn same_ops_same_graph(_: &ConvergenceModel, state: &State) -> bool {
+    let replicas = &state.actor_states;
+    (0..replicas.len()).all(|a| {
+        (a + 1..replicas.len()).all(|b| {
+            replicas[a].seen != replicas[b].seen
+                || (replicas[a].graph.0 == replicas[b].graph.0
+                    && replicas[a].graph.0.digest() == replicas[b].graph.0.digest())
+        })
+    })
+}
+
+fn equal_to_fresh_join(model: &ConvergenceModel, state: &State) -> bool {
+    state.actor_states.iter().all(|s| {
+        let oracle = model.inner.cfg.oracle(state, &s.seen);
+        oracle.join_problem.is_none()
+            && oracle.fingerprint == crdt_fingerprint(&s.replica)
+            && oracle.graph == *s.graph.0
+    })
+}
+
+fn matches_spec_everywhere(model: &ConvergenceModel, state: &State) -> bool {
+    state.actor_states.iter().all(|s| {
+        let oracle = model.inner.cfg.oracle(state, &s.seen);
+        oracle.spec_problem.is_none() && oracle.graph == *s.graph.0
+    })
+}
+
+fn late_joiner_equals(model: &ConvergenceModel, state: &State) -> bool {
+    state.actor_states.iter().all(|s| {
+        let key = crdt_fingerprint(&s.replica);
+        if let Some(verdict) = model.inner.cfg.cache.installs.lock().expect("cache lock").get(&key) {
+            return verdict.is_none();
+        }
+        let verdict = late_join_problem(&model.inner.cfg, &s.replica, &s.graph.0);
+        let mut cache = model.inner.cfg.cache.installs.lock().expect("cache lock");
+        if cache.len() >= CACHE_LIMIT {
+            cache.clear();
+        }
+        cache.insert(key, verdict.clone());
+        verdict.is_none()
+    })
+}
+
+/// Installs `replica`'s encoded snapshot into a fresh replica (with the same planted mutant) and compares.
+fn late_join_problem(setup: &Setup, replica: &Replica, graph: &VisibleGraph) -> Option<String> {
+    let snapshot = match Delta::decode(&replica.encode_snapshot()) {
+        Ok(snapshot) => snapshot,
+        Err(error) => return Some(format!("the snapshot does not decode: {error}")),
+    };
+    let mut joiner = Replica::new(ReplicaId(998));
+    #[cfg(feature = "mutants")]
+    joiner.plant_mutant(setup.config.planted);
+    #[cfg(not(feature = "mutants"))]
+    let _ = setup;
+    if let Err(error) = joiner.apply(&snapshot) {
+        return Some(format!("the snapshot is refused: {error}"));
+    }
+    if crdt_fingerprint(&joiner) != crdt_fingerprint(replica) || joiner.visible_graph() != *graph {
+        return Some("the late joiner differs".to_owned());
+    }
+    None
+}
+
+fn quiescent_replicas_converge(model: &ConvergenceModel, state: &State) -> bool {
+    if !(budgets_spent(&model.inner.cfg, state) && quiescent(state)) {
         return true;
     }
-    let replicas = settled_replicas(&model.cfg, state);
+    let replicas = settled_replicas(&model.inner.cfg, state);
     replicas.windows(2).all(|pair| pair[0].digest() == pair[1].digest())
 }
 
-fn quiescent_replicas_match_spec(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {
-    if !(ops_spent(&model.cfg, state) && quiescent(&model.cfg, state)) {
+fn quiescent_replicas_match_spec(model: &ConvergenceModel, state: &State) -> bool {
+    if !(budgets_spent(&model.inner.cfg, state) && quiescent(state)) {
         return true;
     }
-    let expected = spec::visible_graph(&all_ops(&model.cfg, state));
-    settled_replicas(&model.cfg, state).iter().all(|r| r.visible_graph() == expected)
+    let ops = all_ops(&model.inner.cfg, state);
+    let expected = spec::visible_graph(&ops);
+    let settled = settled_replicas(&model.inner.cfg, state);
+    // Convergence means every operation was applied everywhere, not only equal graphs.
+    settled.iter().all(|r| r.visible_graph() == expected && ops.iter().all(|op| r.applied().contains(op.id)))
 }
 
-fn conflicts_happen(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {
-    let ops = all_ops(&model.cfg, state);
+fn conflicts_happen(model: &ConvergenceModel, state: &State) -> bool {
+    let ops = all_ops(&model.inner.cfg, state);
     let order = spec::CausalOrder::new(&ops);
     ops.iter().enumerate().any(|(i, a)| {
         ops[i + 1..]
@@ -508,8 +1004,13 @@ fn conflicts_happen(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> b
     })
 }
 
-fn quiescent_end_reached(model: &ActorModel<ReplicaActor, Setup>, state: &State) -> bool {
-    ops_spent(&model.cfg, state) && quiescent(&model.cfg, state)
+fn snapshot_answered(model: &ConvergenceModel, state: &State) -> bool {
+    // Vacuous without announces; with them, a history too short for the gap must be seen to fall back.
+    model.setup().config.syncs == 0 || state.network.iter_all().any(|e| matches!(e.msg, Msg::Snapshot { .. }))
+}
+
+fn quiescent_end_reached(model: &ConvergenceModel, state: &State) -> bool {
+    budgets_spent(&model.inner.cfg, state) && quiescent(state)
 }
 
 /// The property names, for tests and the mutant check.
@@ -517,21 +1018,113 @@ pub mod properties {
     /// Invariants on every replica state.
     pub const INVARIANTS: &str = "every state: no dangling edge, unique names, deleted nodes invisible";
     /// No delta is refused.
-    pub const NO_REFUSAL: &str = "every delta is accepted";
+    pub const NO_REFUSAL: &str = "every delta and snapshot decodes and is accepted";
+    /// Damaged deltas are refused.
+    pub const DAMAGED: &str = "every truncated delta is refused and leaves the replica unchanged";
     /// Stamps respect causality.
     pub const STAMPS: &str = "an operation's stamp is above those it saw";
+    /// Strong eventual consistency on every state.
+    pub const SEC: &str = "every state: replicas that applied the same operations show equal graphs and digests";
+    /// Each replica equals the join of its deltas.
+    pub const FRESH: &str = "every state: each replica equals a fresh replica joining its deltas (either order)";
+    /// Each replica equals the specification of what it applied.
+    pub const SPEC_EVERY: &str =
+        "every state: a replica that applied a causally closed set of operations shows their specification";
+    /// A late joiner installing a snapshot equals its source.
+    pub const LATE_JOIN: &str = "every state: a fresh replica installing a replica's snapshot equals it";
+    /// Change events are complete.
+    pub const EVENTS: &str = "every step: the change events turn the previous visible graph into the new one";
     /// Convergence at quiescence.
     pub const CONVERGE: &str = "quiescent, budget spent: all replicas have equal digests";
     /// Agreement with the specification at quiescence.
-    pub const SPEC: &str = "quiescent, budget spent: every replica equals the reference specification";
+    pub const SPEC: &str =
+        "quiescent, budget spent: every replica applied every operation and equals the specification";
     /// Conflicts are explored.
     pub const CONFLICTS: &str = "concurrent conflicting operations happen";
+    /// Anti-entropy falls back to a snapshot (with announces).
+    pub const SNAPSHOT: &str = "an announce is answered with a snapshot (when announces are allowed)";
     /// The quiescent end is reached (the quiescent properties are not vacuous).
     pub const END: &str = "a quiescent state with the budget spent is reached";
 }
 
+/// The convergence model: Stateright's actor model of the replicas, with the checker's choices limited to the
+/// budgets left (an operation, clock advance or announce past its budget is not even computed).
+pub struct ConvergenceModel {
+    inner: ActorModel<ReplicaActor, Setup>,
+}
+
+impl ConvergenceModel {
+    /// The configuration, seed and caches.
+    pub fn setup(&self) -> &Setup {
+        &self.inner.cfg
+    }
+}
+
+/// Totals spent by all replicas: operations, clock advances, announces.
+fn spent(state: &State) -> (usize, usize, usize) {
+    state.actor_states.iter().fold((0, 0, 0), |(ops, ticks, syncs), s| {
+        (ops + usize::from(s.ops_done), ticks + usize::from(s.ticks_done), syncs + usize::from(s.syncs_done))
+    })
+}
+
+impl Model for ConvergenceModel {
+    type State = State;
+    type Action = <ActorModel<ReplicaActor, Setup> as Model>::Action;
+
+    fn init_states(&self) -> Vec<State> {
+        self.inner.init_states()
+    }
+
+    fn actions(&self, state: &State, actions: &mut Vec<Self::Action>) {
+        self.inner.actions(state, actions);
+        let config = &self.inner.cfg.config;
+        let (ops, ticks, syncs) = spent(state);
+        actions.retain(|action| match action {
+            ActorModelAction::SelectRandom { random: Choice::Op(_), .. } => ops < config.ops,
+            ActorModelAction::SelectRandom { random: Choice::Tick, .. } => ticks < config.ticks,
+            ActorModelAction::SelectRandom { random: Choice::Announce(_), .. } => syncs < config.syncs,
+            _ => true,
+        });
+    }
+
+    fn next_state(&self, state: &State, action: Self::Action) -> Option<State> {
+        self.inner.next_state(state, action)
+    }
+
+    fn format_action(&self, action: &Self::Action) -> String {
+        self.inner.format_action(action)
+    }
+
+    fn format_step(&self, state: &State, action: Self::Action) -> Option<String> {
+        self.inner.format_step(state, action)
+    }
+
+    fn as_svg(&self, path: stateright::Path<State, Self::Action>) -> Option<String> {
+        self.inner.as_svg(path)
+    }
+
+    fn properties(&self) -> Vec<Property<Self>> {
+        vec![
+            Property::always(properties::INVARIANTS, invariants_hold),
+            Property::always(properties::NO_REFUSAL, no_delta_refused),
+            Property::always(properties::DAMAGED, damaged_refused),
+            Property::always(properties::STAMPS, stamps_follow_causality),
+            Property::always(properties::SEC, same_ops_same_graph),
+            Property::always(properties::FRESH, equal_to_fresh_join),
+            Property::always(properties::SPEC_EVERY, matches_spec_everywhere),
+            Property::always(properties::LATE_JOIN, late_joiner_equals),
+            Property::always(properties::EVENTS, change_events_complete),
+            Property::always(properties::CONVERGE, quiescent_replicas_converge),
+            Property::always(properties::SPEC, quiescent_replicas_match_spec),
+            Property::sometimes(properties::CONFLICTS, conflicts_happen),
+            Property::sometimes(properties::SNAPSHOT, snapshot_answered),
+            Property::sometimes(properties::END, quiescent_end_reached),
+        ]
+    }
+}
+
 /// Builds the model.
-pub fn model(config: &ConvergenceConfig) -> ActorModel<ReplicaActor, Setup> {
+pub fn model(config: &ConvergenceConfig) -> ConvergenceModel {
     let seed = Seed::build();
     let n = config.replicas;
     let actors = (0..n)
@@ -539,9 +1132,7 @@ pub fn model(config: &ConvergenceConfig) -> ActorModel<ReplicaActor, Setup> {
             index,
             peers: (0..n).filter(|&p| p != index).map(Id::from).collect(),
             seed: seed.clone(),
-            keep_history: config.network == NetworkKind::Lossy,
-            #[cfg(feature = "mutants")]
-            planted: config.planted,
+            config: config.clone(),
         })
         .collect::<Vec<_>>();
     let network = match config.network {
@@ -549,20 +1140,9 @@ pub fn model(config: &ConvergenceConfig) -> ActorModel<ReplicaActor, Setup> {
         NetworkKind::UnorderedNonduplicating | NetworkKind::Lossy => Network::new_unordered_nonduplicating([]),
     };
     let lossy = if config.network == NetworkKind::Lossy { LossyNetwork::Yes } else { LossyNetwork::No };
-    ActorModel::new(Setup { config: config.clone(), seed }, ())
-        .actors(actors)
-        .init_network(network)
-        .lossy_network(lossy)
-        .property(Expectation::Always, properties::INVARIANTS, invariants_hold)
-        .property(Expectation::Always, properties::NO_REFUSAL, no_delta_refused)
-        .property(Expectation::Always, properties::STAMPS, stamps_follow_causality)
-        .property(Expectation::Always, properties::CONVERGE, quiescent_replicas_converge)
-        .property(Expectation::Always, properties::SPEC, quiescent_replicas_match_spec)
-        .property(Expectation::Sometimes, properties::CONFLICTS, conflicts_happen)
-        .property(Expectation::Sometimes, properties::END, quiescent_end_reached)
-        .within_boundary(|setup, state| {
-            state.actor_states.iter().map(|s| usize::from(s.ops_done)).sum::<usize>() <= setup.config.ops
-        })
+    let setup = Setup { config: config.clone(), seed, cache: Arc::new(OracleCache::default()) };
+    let inner = ActorModel::new(setup, ()).actors(actors).init_network(network).lossy_network(lossy);
+    ConvergenceModel { inner }
 }
 
 /// Checks the convergence model.

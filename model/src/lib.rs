@@ -1,8 +1,10 @@
 //! Stateright models that check the implementation's own code.
 //!
-//! - [`convergence`]: replicas hold real [`dsr::Replica`] values and exchange real deltas over Stateright's
-//!   networks; the properties compare every replica with each other and with an independent reference
-//!   specification ([`spec`]).
+//! - [`convergence`]: replicas hold real [`dsr::Replica`] values and exchange real encoded deltas and snapshots
+//!   over Stateright's networks, with checker-chosen operations, clock advances and anti-entropy; on every state the
+//!   properties compare every replica with the others, with a fresh replica joining its deltas, with a late joiner
+//!   installing its snapshot and with an independent reference specification ([`spec`]), and check its change
+//!   events.
 //! - [`agents`]: N real agent protocol cores ([`agent::core::AgentCore`]) exchange real encoded messages over a
 //!   network that loses, duplicates and reorders, with ticks, crashes and restarts, and cuts that heal; the
 //!   properties are unique lives, bounded buffers, and convergence to the specification once the faults stop.

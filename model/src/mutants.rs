@@ -47,6 +47,7 @@ impl MutantResult {
 /// The smallest convergence configuration whose network can expose each replica mutant.
 pub fn dsr_mutant_configs() -> Vec<(DsrMutant, ConvergenceConfig)> {
     let config = |replicas, ops, network| ConvergenceConfig { replicas, ops, network, ..ConvergenceConfig::default() };
+    let nondup = NetworkKind::UnorderedNonduplicating;
     DsrMutant::ALL
         .into_iter()
         .map(|mutant| {
@@ -55,11 +56,30 @@ pub fn dsr_mutant_configs() -> Vec<(DsrMutant, ConvergenceConfig)> {
                 DsrMutant::JoinNotIdempotent => config(2, 2, NetworkKind::UnorderedDuplicating),
                 // Only loss makes anti-entropy matter.
                 DsrMutant::AntiEntropySkipsLastDelta => config(2, 1, NetworkKind::Lossy),
-                DsrMutant::RemoveLosesContext | DsrMutant::DeleteKeepsIncidentEdges => {
-                    config(2, 1, NetworkKind::UnorderedNonduplicating)
+                DsrMutant::RemoveLosesContext | DsrMutant::DeleteKeepsIncidentEdges => config(2, 1, nondup),
+                DsrMutant::TieBreakByArrival | DsrMutant::EdgeToDeletedNodeVisible => config(2, 2, nondup),
+                // A delete that hides an edge; a snapshot of a state with a tombstone; a node inserted with an
+                // attribute (its second dot).
+                DsrMutant::IncidentEdgeEventsMissing
+                | DsrMutant::InstallDropsTombstones
+                | DsrMutant::CodecDotOffset => config(2, 1, nondup),
+                // An attribute write on an inserted node that arrives before the node.
+                DsrMutant::EarlyAttrDropped => config(2, 2, nondup),
+                // An overwrite that reaches one replica without the write it removed; that replica's snapshot
+                // (no history at all) answers a third one's announce.
+                DsrMutant::SnapshotAppliedFromContext => {
+                    ConvergenceConfig { syncs: 1, history: 0, ..config(3, 2, nondup) }
                 }
-                DsrMutant::TieBreakByArrival | DsrMutant::EdgeToDeletedNodeVisible => {
-                    config(2, 2, NetworkKind::UnorderedNonduplicating)
+                // Three operations of one replica, the first arriving after the third; two concurrent inserts of
+                // one name, then the holder deleted.
+                DsrMutant::ContextCompactionSkipsGap | DsrMutant::NameKeptByDeletedHolder => config(2, 3, nondup),
+                // A clock advanced to a stamp, then another operation at the same physical time.
+                DsrMutant::StampTiesPhysicalClock => ConvergenceConfig { ticks: 1, ..config(2, 2, nondup) },
+                // An announce answered with a snapshot (no history at all), then an operation.
+                DsrMutant::SnapshotJoinKeepsClock => ConvergenceConfig { syncs: 1, history: 0, ..config(2, 2, nondup) },
+                // Two lost deltas, an announce answered from a history of one.
+                DsrMutant::HistoryOffByOne => {
+                    ConvergenceConfig { syncs: 1, history: 1, ..config(2, 2, NetworkKind::Lossy) }
                 }
             };
             (mutant, base.with_mutant(mutant))

@@ -12,6 +12,11 @@
 //!   re-insert of the edge) saw it; the shown value is the live write with the highest (stamp, replica);
 //! - among visible nodes sharing a name, the earliest (insert stamp, id) keeps it and the others are `name#id`.
 //!
+//! The replica does not deliver causally (see the `dsr` crate docs), so a replica that has applied an operation
+//! without one its writer had seen may show what this specification does not (an overwritten value beside its
+//! overwrite). The convergence model therefore compares a replica with this specification when its applied
+//! operations are causally closed (each one's past among them), and at quiescence, where all are.
+//!
 //! Because stamps follow causality transitively (each replica's hybrid logical clock moves past every delta it
 //! applies), the shown value of a register is always the causally latest write; a write that was only seen through a
 //! third replica's unrelated operation may stay listed among the concurrent values beside it.

@@ -78,6 +78,16 @@ struct ConvergenceArgs {
     /// unordered-duplicating, unordered-nonduplicating or lossy.
     #[arg(long, default_value = "unordered-nonduplicating", value_parser = parse_network)]
     network: NetworkKind,
+    /// Clock advances (each moves one replica's physical clock ahead), shared by all replicas.
+    #[arg(long, default_value_t = 0)]
+    ticks: usize,
+    /// Anti-entropy announces (a replica's applied operations to one peer, answered with deltas or a
+    /// snapshot), shared by all replicas.
+    #[arg(long, default_value_t = 0)]
+    syncs: usize,
+    /// Deltas each replica keeps for anti-entropy (with loss or announces); older gaps get a snapshot.
+    #[arg(long, default_value_t = 1)]
+    history: usize,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -146,9 +156,17 @@ pub fn run(args: CheckArgs) -> Result<()> {
             if args.replicas < 2 || args.replicas > 5 {
                 bail!("--replicas must be between 2 and 5 (got {})", args.replicas);
             }
+            if args.ops + args.ticks + args.syncs > 12 {
+                bail!(
+                    "--ops, --ticks and --syncs add up to at most 12 (the state space grows exponentially with them)"
+                );
+            }
             let config = ConvergenceConfig {
                 replicas: args.replicas,
                 ops: args.ops,
+                ticks: args.ticks,
+                syncs: args.syncs,
+                history: args.history,
                 network: args.network,
                 ..Default::default()
             };

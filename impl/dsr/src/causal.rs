@@ -9,6 +9,7 @@ use std::collections::BTreeSet;
 use serde::{Deserialize, Serialize};
 
 use crate::ids::{Dot, ReplicaId};
+use crate::mutants::{DsrMutant, Plant};
 
 /// A set of dots: a version vector plus out-of-order dots.
 ///
@@ -113,6 +114,20 @@ impl CausalContext {
         }
         for dot in &other.cloud {
             self.insert(*dot);
+        }
+    }
+
+    /// [`CausalContext::merge`], with a planted mutant of the compaction (see [`crate::mutants`]).
+    pub(crate) fn merge_planted(&mut self, other: &CausalContext, plant: Plant) {
+        self.merge(other);
+        if plant.is(DsrMutant::ContextCompactionSkipsGap) {
+            for index in 0..self.vv.len() {
+                let (replica, counter) = self.vv[index];
+                if self.cloud.remove(&Dot::new(replica, counter + 2)) {
+                    self.vv[index].1 = counter + 2;
+                    self.compact_replica(index);
+                }
+            }
         }
     }
 

@@ -38,6 +38,7 @@ use crate::causal::CausalContext;
 use crate::dictionary::Dictionary;
 use crate::error::DeltaError;
 use crate::ids::{Dot, EdgeKey, Name, NodeId, ReplicaId, Stamp};
+use crate::mutants::{DsrMutant, Plant};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store};
 use crate::value::Value;
 
@@ -84,6 +85,8 @@ pub struct Delta {
     /// For a snapshot: the operations its sender had joined (see [`crate::Replica::applied`]); empty otherwise.
     pub(crate) applied: CausalContext,
     pub(crate) store: Store,
+    /// The mutant planted in the replica that made it (the codec's mutants live in encoding).
+    pub(crate) plant: Plant,
 }
 
 impl Delta {
@@ -145,6 +148,7 @@ impl Delta {
             ctx: &self.ctx,
             applied: &self.applied,
             store: &self.store,
+            plant: self.plant,
         }
     }
 
@@ -234,6 +238,7 @@ pub(crate) struct DeltaParts<'a> {
     pub(crate) ctx: &'a CausalContext,
     pub(crate) applied: &'a CausalContext,
     pub(crate) store: &'a Store,
+    pub(crate) plant: Plant,
 }
 
 impl DeltaParts<'_> {
@@ -246,8 +251,12 @@ impl DeltaParts<'_> {
     pub(crate) fn encode_into(&self, out: &mut Vec<u8>) {
         let header_at = out.len();
         out.push(0);
-        let mut body =
-            Body { ser: postcard::Serializer { output: Out(out) }, origin: self.origin, max_stamp: Stamp(0) };
+        let mut body = Body {
+            ser: postcard::Serializer { output: Out(out) },
+            origin: self.origin,
+            max_stamp: Stamp(0),
+            plant: self.plant,
+        };
         body.delta(self).expect("encoding into a Vec cannot fail");
         let Body { ser, max_stamp, .. } = body;
         let out = ser.output.0;
@@ -327,6 +336,7 @@ struct Body<'a> {
     ser: Ser<'a>,
     origin: Option<Origin>,
     max_stamp: Stamp,
+    plant: Plant,
 }
 
 impl Body<'_> {
@@ -385,7 +395,14 @@ impl Body<'_> {
     /// An entry's dot and stamp (its value follows).
     fn entry_head<T>(&mut self, entry: &Entry<T>) -> postcard::Result<()> {
         self.max_stamp = self.max_stamp.max(entry.stamp);
-        put(&mut self.ser, &wire_dot(entry.dot, self.origin))?;
+        let mut dot = wire_dot(entry.dot, self.origin);
+        if let WireDot::Same(offset) = &mut dot
+            && *offset > 0
+            && self.plant.is(DsrMutant::CodecDotOffset)
+        {
+            *offset -= 1;
+        }
+        put(&mut self.ser, &dot)?;
         // A `[u8; 8]` is its 8 bytes in postcard: written in one piece rather than byte by byte.
         self.ser.output.0.extend_from_slice(&entry.stamp.0.to_le_bytes());
         Ok(())
@@ -611,8 +628,15 @@ impl<'de> Reader<'de> {
         let edges = unsorted.unwrap_or_else(|| sorted.into_iter().collect());
 
         let store = Store { tombstones, nodes, edges };
-        let delta =
-            Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, applied: CausalContext::default(), store };
+        let delta = Delta {
+            origin,
+            complete,
+            clock: Stamp(0),
+            ctx: decoder.ctx,
+            applied: CausalContext::default(),
+            store,
+            plant: Plant::NONE,
+        };
         Ok((delta, decoder.max_stamp))
     }
 

@@ -72,10 +72,26 @@
 //! **Names.** Node names are unique among visible nodes. A local insert with a name already visible is refused.
 //! Two agents that concurrently insert different nodes with the same name both succeed; every replica then shows
 //! the node with the lowest (insert stamp, id) under the plain name and the other as `name#id`. Node names may not
-//! contain `#`. If the holder is deleted, the other takes the plain name back.
+//! contain `#`. If the holder is deleted, the other takes the plain name back. A node whose shown name changes
+//! either way is reported by a [`Change::NodeRenamed`] event (found by the model).
 //!
 //! **Delivery.** Deltas may arrive in any order and more than once. One that refers to something not yet seen (an
 //! edge before its nodes, an attribute before its node) is kept and becomes visible when the rest arrives.
+//!
+//! **Causal consistency: not provided; what a reader may see instead.** A replica joins each delta when it
+//! arrives; it does not hold a delta back until the operations its writer had applied have arrived (that would need
+//! every delta to carry its writer's applied version vector, and one lost best-effort update would hold back every
+//! later delta of everyone who had seen it until a repair). What is guaranteed: the visibility rules above give
+//! the robot's read order for free — an attribute never shows before its node, an edge never before both of its
+//! nodes, and nothing of a deleted node shows once the delete has arrived; two replicas that have applied the same
+//! operations show the same graph, whatever the order (strong eventual consistency); and a replica whose applied
+//! operations include everything each of them had seen shows exactly what the reference specification says. What a
+//! reader may see while an operation has arrived without an earlier one its writer had seen (until that one
+//! arrives, which anti-entropy and the agent's gap requests see to): a value an overwrite had already superseded,
+//! listed beside the overwrite among the concurrent values (the winner is still the causally latest write); and an
+//! edge re-inserted after a delete that has not arrived yet showing the attribute values of the edge's earlier
+//! life, which the re-insert had cleared. (Both found by the model in `model/`, which checks all of this on every
+//! state.)
 //!
 //! **Anti-entropy and late join.** [`Replica::snapshot`] is the whole state as a delta. [`Replica::missing_for`]
 //! takes a peer's context and returns the retained deltas it lacks, or a snapshot when the bounded history

@@ -20,17 +20,54 @@ pub enum DsrMutant {
     EdgeToDeletedNodeVisible,
     /// Anti-entropy leaves out the last delta a peer is missing.
     AntiEntropySkipsLastDelta,
+    /// Context compaction closes a one-dot gap: a dot that extends the version vector also absorbs an
+    /// out-of-order dot two further on, so the missing dot between them counts as seen.
+    ContextCompactionSkipsGap,
+    /// A joined snapshot's causal context is taken as the operations its sender had applied (instead of the
+    /// snapshot's own list of them), so the receiver claims operations it only saw removed, and anti-entropy, which
+    /// compares applied operations, never sends them.
+    SnapshotAppliedFromContext,
+    /// The history is taken to reach one delta further back than it does: the oldest operation a peer lacks is
+    /// counted as retained, and the answer leaves it out instead of falling back to a snapshot.
+    HistoryOffByOne,
+    /// Installing a snapshot into a fresh replica drops the snapshot's tombstones.
+    InstallDropsTombstones,
+    /// The wire format writes a dot of the delta's own replica after the first generated one at one less than
+    /// its offset (the first dot, and every single-dot delta, unaffected).
+    CodecDotOffset,
+    /// A deleted node stays in the name index while other nodes share its name, so a concurrent insert of the same
+    /// name keeps showing as `name#id` instead of taking the plain name back.
+    NameKeptByDeletedHolder,
+    /// An attribute write for a node this replica has not seen inserted is dropped instead of kept for later.
+    EarlyAttrDropped,
+    /// Change events leave out the edges that a node's deletion (or arrival) hides (or shows).
+    IncidentEdgeEventsMissing,
+    /// The hybrid logical clock takes the physical clock as the stamp when it is not behind the last stamp (`>=`
+    /// instead of `>`), so a stamp can equal the one before it, a remote one included.
+    StampTiesPhysicalClock,
+    /// Joining a snapshot does not move the clock past the snapshot's stamps.
+    SnapshotJoinKeepsClock,
 }
 
 impl DsrMutant {
     /// Every mutant.
-    pub const ALL: [DsrMutant; 6] = [
+    pub const ALL: [DsrMutant; 16] = [
         DsrMutant::JoinNotIdempotent,
         DsrMutant::RemoveLosesContext,
         DsrMutant::TieBreakByArrival,
         DsrMutant::DeleteKeepsIncidentEdges,
         DsrMutant::EdgeToDeletedNodeVisible,
         DsrMutant::AntiEntropySkipsLastDelta,
+        DsrMutant::ContextCompactionSkipsGap,
+        DsrMutant::SnapshotAppliedFromContext,
+        DsrMutant::HistoryOffByOne,
+        DsrMutant::InstallDropsTombstones,
+        DsrMutant::CodecDotOffset,
+        DsrMutant::NameKeptByDeletedHolder,
+        DsrMutant::EarlyAttrDropped,
+        DsrMutant::IncidentEdgeEventsMissing,
+        DsrMutant::StampTiesPhysicalClock,
+        DsrMutant::SnapshotJoinKeepsClock,
     ];
 }
 

@@ -69,6 +69,12 @@ pub enum Change {
         /// The node.
         id: NodeId,
     },
+    /// A visible node's shown name changed: it took its plain name back (the node that held the name was deleted)
+    /// or became `name#id` (a concurrent insert of the same name holds it now).
+    NodeRenamed {
+        /// The node.
+        id: NodeId,
+    },
     /// An edge became visible.
     EdgeInserted {
         /// The edge.
@@ -220,7 +226,8 @@ struct Touched {
 
 /// What is visible of the touched elements (before or after a join), for change events.
 struct Visibility {
-    nodes: BTreeMap<NodeId, bool>,
+    /// `None` if invisible, else whether the node shows its plain name (not `name#id`).
+    nodes: BTreeMap<NodeId, Option<bool>>,
     edges: BTreeMap<EdgeKey, bool>,
     attrs: BTreeMap<(Element, Name), Option<Dot>>,
 }
@@ -342,6 +349,10 @@ impl Replica {
     }
 
     fn tick(&mut self, now_ns: u64) -> Stamp {
+        if self.plant.is(DsrMutant::StampTiesPhysicalClock) && now_ns >= self.clock.0 {
+            self.clock = Stamp(now_ns);
+            return self.clock;
+        }
         self.clock = Stamp(now_ns.max(self.clock.0.saturating_add(1)));
         self.clock
     }
@@ -388,6 +399,7 @@ impl Replica {
             ctx,
             applied: CausalContext::default(),
             store,
+            plant: self.plant,
         });
         self.join(&delta);
         for dot in delta.origin.iter().flat_map(Origin::dots) {
@@ -703,7 +715,7 @@ impl Replica {
     fn can_install(&self, delta: &Delta) -> bool {
         delta.complete
             && delta.origin.is_none()
-            && self.plant == Plant::NONE
+            && (self.plant == Plant::NONE || self.plant.is(DsrMutant::InstallDropsTombstones))
             && self.ctx.is_empty()
             && self.applied.is_empty()
             && self.store.nodes.is_empty()
@@ -726,7 +738,10 @@ impl Replica {
                 .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
         }
         let Delta { clock, ctx, applied, store, .. } = delta;
-        let Store { tombstones, mut nodes, mut edges } = store;
+        let Store { mut tombstones, mut nodes, mut edges } = store;
+        if self.plant.is(DsrMutant::InstallDropsTombstones) {
+            tombstones.clear();
+        }
         nodes.retain(|id, node| {
             if tombstones.contains(id) {
                 return false;
@@ -813,7 +828,9 @@ impl Replica {
             self.applied.insert(dot);
         }
         if delta.complete {
-            self.applied.merge(&delta.applied);
+            let sender_applied =
+                if self.plant.is(DsrMutant::SnapshotAppliedFromContext) { &delta.ctx } else { &delta.applied };
+            self.applied.merge(sender_applied);
         }
         if !duplicate && delta.origin.is_some() && !delta.complete {
             self.log.push(shared());
@@ -907,7 +924,9 @@ impl Replica {
             if mine.core.join(&theirs.core, &self.ctx, &delta.ctx, plant) {
                 names_to_reindex.push(*id);
             }
-            join_attrs(&mut mine.attrs, &theirs.attrs, &self.ctx, &delta.ctx, delta.complete, plant);
+            if !(plant.is(DsrMutant::EarlyAttrDropped) && mine.core.is_empty()) {
+                join_attrs(&mut mine.attrs, &theirs.attrs, &self.ctx, &delta.ctx, delta.complete, plant);
+            }
             if mine.is_empty() {
                 self.store.nodes.remove(id);
             }
@@ -954,8 +973,8 @@ impl Replica {
             self.store.edges.retain(|_, edge| !edge.is_empty());
         }
 
-        self.ctx.merge(&delta.ctx);
-        if origin != Some(self.id) {
+        self.ctx.merge_planted(&delta.ctx, plant);
+        if origin != Some(self.id) && !(delta.complete && plant.is(DsrMutant::SnapshotJoinKeepsClock)) {
             // A local operation has already ticked the clock past its own stamp.
             self.clock = self.clock.max(delta.clock);
         }
@@ -978,8 +997,21 @@ impl Replica {
             touched.nodes.extend(self.store.nodes.keys().copied());
             touched.edges.extend(self.store.edges.keys().cloned());
         }
+        // A node that arrives or goes may take a name from, or give it back to, the visible nodes sharing it.
+        let names: BTreeSet<&Name> = touched
+            .nodes
+            .iter()
+            .flat_map(|id| {
+                let mine = self.store.nodes.get(id).map(|n| n.core.values.iter()).into_iter().flatten();
+                let theirs = delta.store.nodes.get(id).map(|n| n.core.values.iter()).into_iter().flatten();
+                mine.chain(theirs).map(|core| &core.value.name)
+            })
+            .collect();
+        let sharing: Vec<NodeId> =
+            names.into_iter().flat_map(|name| self.names.get(name).into_iter().flatten().map(|(_, id)| *id)).collect();
+        touched.nodes.extend(sharing);
         let nodes: Vec<NodeId> = touched.nodes.iter().copied().collect();
-        for id in nodes {
+        for id in nodes.into_iter().filter(|_| !self.plant.is(DsrMutant::IncidentEdgeEventsMissing)) {
             touched.edges.extend(self.incident_edges(id));
         }
         let mut names = |element: Element, attrs: Option<&Attrs>| {
@@ -1001,7 +1033,7 @@ impl Replica {
     fn look(&self, touched: &Touched) -> Visibility {
         let plant = self.plant;
         Visibility {
-            nodes: touched.nodes.iter().map(|id| (*id, self.node_visible(*id))).collect(),
+            nodes: touched.nodes.iter().map(|id| (*id, self.node(*id).map(|node| node.holds_name()))).collect(),
             edges: touched.edges.iter().map(|key| (key.clone(), self.edge_visible(key))).collect(),
             attrs: touched
                 .attrs
@@ -1031,8 +1063,9 @@ impl Replica {
         let mut push = |change| events.push(ChangeEvent { change, origin });
         for (id, was) in &before.nodes {
             match (was, after.nodes[id]) {
-                (false, true) => push(Change::NodeInserted { id: *id }),
-                (true, false) => push(Change::NodeDeleted { id: *id }),
+                (None, Some(_)) => push(Change::NodeInserted { id: *id }),
+                (Some(_), None) => push(Change::NodeDeleted { id: *id }),
+                (Some(plain), Some(now)) if *plain != now => push(Change::NodeRenamed { id: *id }),
                 _ => {}
             }
         }
@@ -1051,7 +1084,7 @@ impl Replica {
                 }
                 (Some(_), None) => {
                     let still_visible = match element {
-                        Element::Node(id) => after.nodes.get(id).copied().unwrap_or(false),
+                        Element::Node(id) => after.nodes.get(id).is_some_and(Option::is_some),
                         Element::Edge(key) => after.edges.get(key).copied().unwrap_or(false),
                     };
                     if !still_visible {
@@ -1090,7 +1123,14 @@ impl Replica {
     /// Brings the name index up to date for nodes whose core changed or that were deleted.
     fn reindex_names(&mut self, ids: &[NodeId]) {
         for id in ids {
+            let stale_kept = self.plant.is(DsrMutant::NameKeptByDeletedHolder)
+                && self.store.tombstones.contains(id)
+                && self
+                    .indexed_names
+                    .get(id)
+                    .is_some_and(|(name, _)| self.names.get(name).is_some_and(|h| h.len() > 1));
             if let Some((name, stamp)) = self.indexed_names.remove(id)
+                && !stale_kept
                 && let Some(holders) = self.names.get_mut(&name)
             {
                 holders.remove(&(stamp, *id));
@@ -1120,6 +1160,7 @@ impl Replica {
             ctx: self.ctx.clone(),
             applied: self.applied.clone(),
             store: self.store.clone(),
+            plant: Plant::NONE,
         }
     }
 
@@ -1141,6 +1182,7 @@ impl Replica {
             ctx: &self.ctx,
             applied: &self.applied,
             store: &self.store,
+            plant: Plant::NONE,
         };
         let mut out = Vec::new();
         parts.encode_into(&mut out);
@@ -1165,7 +1207,9 @@ impl Replica {
                 selected.push(Arc::clone(delta));
             }
         }
-        if !missing.iter().all(|dot| covered.contains(dot)) {
+        // Mutant: the oldest missing operation is taken as retained.
+        let unchecked = usize::from(self.plant.is(DsrMutant::HistoryOffByOne));
+        if !missing.iter().skip(unchecked).all(|dot| covered.contains(dot)) {
             return Missing::Snapshot;
         }
         if self.plant.is(DsrMutant::AntiEntropySkipsLastDelta) {
@@ -1519,8 +1563,13 @@ impl<'a> NodeRef<'a> {
     /// concurrently with the same name holds it (the earliest stamp, then the lowest id, keeps the plain name).
     pub fn name(&self) -> Cow<'a, str> {
         let name = &self.core.value.name;
-        let holder = self.replica.names.get(name).and_then(|holders| holders.first()).map(|(_, id)| *id);
-        if holder == Some(self.id) { Cow::Borrowed(name.as_str()) } else { Cow::Owned(format!("{name}#{}", self.id)) }
+        if self.holds_name() { Cow::Borrowed(name.as_str()) } else { Cow::Owned(format!("{name}#{}", self.id)) }
+    }
+
+    /// Whether the node is shown under its plain inserted name (not `name#id`).
+    pub fn holds_name(&self) -> bool {
+        let holders = self.replica.names.get(&self.core.value.name);
+        holders.and_then(|holders| holders.first()).is_some_and(|(_, id)| *id == self.id)
     }
 
     /// The name as inserted.

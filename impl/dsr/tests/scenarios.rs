@@ -180,6 +180,33 @@ fn change_events_report_local_and_remote_changes() {
     let _ = NodeId(0);
 }
 
+/// Found by the widened model (issue 16): a node that took its plain name back when the holder of the name was
+/// deleted changed its shown name without a change event, so a reader kept showing `n#id`.
+#[test]
+fn a_node_taking_its_name_back_is_reported_renamed() {
+    let (mut a, mut b) = pair();
+    let (first, d1) = a.insert_node(1, NewNode::new("object", "n")).unwrap();
+    let (second, d2) = b.insert_node(2, NewNode::new("object", "n")).unwrap();
+    ship(&d2, &mut a);
+    ship(&d1, &mut b);
+    assert_eq!(b.node(second).unwrap().name(), format!("n#{second}"));
+    b.set_change_tracking(true);
+    let delete = a.delete_node(3, first).unwrap();
+    ship(&delete, &mut b);
+    let changes: Vec<Change> = b.drain_changes().into_iter().map(|e| e.change).collect();
+    assert_eq!(changes, vec![Change::NodeDeleted { id: first }, Change::NodeRenamed { id: second }]);
+    assert_eq!(b.node(second).unwrap().name(), "n");
+    // And the other way: a concurrent insert that wins the name renames the node that showed it.
+    let (mut c, mut d) = pair();
+    let (early, e1) = c.insert_node(1, NewNode::new("object", "m")).unwrap();
+    let (late, e2) = d.insert_node(5, NewNode::new("object", "m")).unwrap();
+    d.set_change_tracking(true);
+    ship(&e1, &mut d);
+    let changes: Vec<Change> = d.drain_changes().into_iter().map(|e| e.change).collect();
+    assert_eq!(changes, vec![Change::NodeInserted { id: early }, Change::NodeRenamed { id: late }]);
+    let _ = e2;
+}
+
 /// Size is deterministic, so the target is pinned here (the C++ implementation sends 112 B of CDR for one int).
 #[test]
 fn one_f32_attribute_update_encodes_in_at_most_40_bytes() {

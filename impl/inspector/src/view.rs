@@ -336,7 +336,7 @@ impl Dirty {
     pub fn add(&mut self, change: &dsr::Change) {
         use dsr::Change::*;
         match change {
-            NodeInserted { id } | NodeDeleted { id } => {
+            NodeInserted { id } | NodeDeleted { id } | NodeRenamed { id } => {
                 self.nodes.insert(*id);
             }
             EdgeInserted { key } | EdgeDeleted { key } => {

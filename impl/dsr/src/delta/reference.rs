@@ -469,7 +469,15 @@ fn from_wire(
             )
         }
     };
-    let mut delta = Delta { origin, complete, clock: Stamp(0), ctx: decoder.ctx, applied, store };
+    let mut delta = Delta {
+        origin,
+        complete,
+        clock: Stamp(0),
+        ctx: decoder.ctx,
+        applied,
+        store,
+        plant: crate::mutants::Plant::NONE,
+    };
     delta.clock = match clock {
         Some(bytes) => Stamp(u64::from_le_bytes(bytes)),
         None => max_value_stamp(&delta.borrowed()),
