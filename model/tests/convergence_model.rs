@@ -60,6 +60,13 @@ fn skewed_clocks_decide_the_winners_and_stamps_still_follow_causality() {
 }
 
 #[test]
+fn everything_at_once_on_a_duplicating_network() {
+    // A clock advance, an announce with a history of one, and truncated copies of every delta.
+    let all = ConvergenceConfig { ticks: 1, syncs: 1, history: 1, ..config(2, 2, NetworkKind::UnorderedDuplicating) };
+    assert_eq!(check(all).unique_states, 127_935);
+}
+
+#[test]
 fn every_property_is_reported() {
     let report = check(config(2, 2, NetworkKind::UnorderedNonduplicating));
     assert_eq!(report.properties.len(), model::convergence::property_count(&ConvergenceConfig::default()));
