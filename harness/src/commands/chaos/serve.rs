@@ -72,15 +72,16 @@ pub fn run(args: ChaosAgentArgs) -> Result<()> {
     }
     let agent = start_rtps_agent_with(config, rtps, None)?;
     let out = Arc::new(Mutex::new(std::io::stdout()));
-    let status = {
+    {
+        // Prints until the process ends (its output closed, or the process exits after the input ends).
         let (agent, out) = (Arc::clone(&agent), Arc::clone(&out));
         let period = Duration::from_millis(args.status_ms.max(1));
         std::thread::spawn(move || {
             while print(&out, &Report::Status(status_line(&agent))).is_ok() {
                 std::thread::sleep(period);
             }
-        })
-    };
+        });
+    }
     let workload = Workload { agent: args.id, image_bytes: args.image_bytes };
     for line in std::io::stdin().lock().lines() {
         let line = line.context("reading standard input")?;
@@ -98,7 +99,6 @@ pub fn run(args: ChaosAgentArgs) -> Result<()> {
         print(&out, &report).context("writing standard output")?;
     }
     agent.shutdown();
-    drop(status);
     Ok(())
 }
 
