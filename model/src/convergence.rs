@@ -35,10 +35,9 @@
 //! permutation of replicas other than the identity preserves the behaviours.
 
 use std::borrow::Cow;
-use std::collections::hash_map::DefaultHasher;
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 use std::hash::{Hash, Hasher};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use bytes::Bytes;
 use dsr::{
@@ -50,7 +49,15 @@ use stateright::actor::{Actor, ActorModel, ActorModelAction, ActorModelState, Id
 use stateright::{Model, Property};
 
 use crate::report::{CheckOptions, CheckReport, run_check};
-use crate::spec::{self, OpId, OpKind, OpRecord};
+use crate::spec::{OpId, OpKind, OpRecord};
+
+pub mod properties;
+
+use properties::{
+    Setup, change_events_complete, conflicts_happen, damaged_refused, equal_to_fresh_join, invariants_hold,
+    late_joiner_equals, matches_spec_everywhere, no_delta_refused, quiescent_end_reached, quiescent_replicas_converge,
+    quiescent_replicas_match_spec, same_ops_same_graph, snapshot_answered, stamps_follow_causality,
+};
 
 /// How the network treats messages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -699,354 +706,7 @@ impl Actor for ReplicaActor {
     }
 }
 
-/// What a fresh replica that joins a set of deltas looks like, and whether the specification agrees.
-#[derive(Debug)]
-struct Oracle {
-    /// Fingerprint of the fresh replica's replicated state (see [`crdt_fingerprint`]).
-    fingerprint: u64,
-    /// Its visible graph.
-    graph: VisibleGraph,
-    /// A delta refused, or the two join orders disagreeing.
-    join_problem: Option<String>,
-    /// The specification disagreeing (checked when the operations are causally closed).
-    spec_problem: Option<String>,
-}
-
-/// Fresh replicas computed so far, by the deltas joined (many states share a set of deltas).
-#[derive(Default)]
-struct OracleCache {
-    by_deltas: Mutex<HashMap<Vec<Bytes>, Arc<Oracle>>>,
-    /// Late-join checks done, by the fingerprint of the replica whose snapshot was installed.
-    installs: Mutex<HashMap<u64, Option<String>>>,
-}
-
-/// Most entries kept in each cache before it is emptied (a bound on memory, not on correctness).
-const CACHE_LIMIT: usize = 1 << 18;
-
-impl std::fmt::Debug for OracleCache {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("OracleCache")
-    }
-}
-
-/// A fingerprint of what a replica replicates: its store, causal context, applied operations and clock.
-fn crdt_fingerprint(replica: &Replica) -> u64 {
-    let mut hasher = DefaultHasher::new();
-    replica.store().hash(&mut hasher);
-    replica.context().hash(&mut hasher);
-    replica.applied().hash(&mut hasher);
-    replica.clock().hash(&mut hasher);
-    hasher.finish()
-}
-
-/// What the properties need besides the state: the configuration, the seed and the caches.
-#[derive(Clone, Debug)]
-pub struct Setup {
-    /// The configuration.
-    pub config: ConvergenceConfig,
-    /// The seed graph.
-    pub seed: Seed,
-    cache: Arc<OracleCache>,
-}
-
-impl Setup {
-    /// The oracle for the operations `seen` (their deltas found among the issued ones).
-    fn oracle(&self, state: &State, seen: &BTreeSet<OpId>) -> Arc<Oracle> {
-        let issued: Vec<&Issued> = state
-            .actor_states
-            .iter()
-            .flat_map(|s| s.issued.iter())
-            .filter(|issued| seen.contains(&issued.record.id))
-            .collect();
-        let key: Vec<Bytes> = issued.iter().map(|issued| issued.bytes.clone()).collect();
-        if let Some(found) = self.cache.by_deltas.lock().expect("cache lock").get(&key) {
-            return Arc::clone(found);
-        }
-        let oracle = Arc::new(self.compute_oracle(&issued));
-        let mut cache = self.cache.by_deltas.lock().expect("cache lock");
-        if cache.len() >= CACHE_LIMIT {
-            cache.clear();
-        }
-        cache.insert(key, Arc::clone(&oracle));
-        oracle
-    }
-
-    fn compute_oracle(&self, issued: &[&Issued]) -> Oracle {
-        let join = |order: &mut dyn Iterator<Item = &&Issued>| -> Result<Replica, String> {
-            let mut fresh = Replica::new(ReplicaId(999));
-            fresh.apply(&self.seed.snapshot).expect("the seed graph applies");
-            for issued in order {
-                let delta = Delta::decode(&issued.bytes).map_err(|e| format!("{}: {e}", issued.record))?;
-                fresh.apply(&delta).map_err(|e| format!("{}: {e}", issued.record))?;
-            }
-            Ok(fresh)
-        };
-        let (forward, backward) = match (join(&mut issued.iter()), join(&mut issued.iter().rev())) {
-            (Ok(forward), Ok(backward)) => (forward, backward),
-            (Err(error), _) | (_, Err(error)) => {
-                let join_problem = Some(format!("a fresh replica refuses a delta: {error}"));
-                return Oracle { fingerprint: 0, graph: VisibleGraph::default(), join_problem, spec_problem: None };
-            }
-        };
-        let fingerprint = crdt_fingerprint(&forward);
-        let graph = forward.visible_graph();
-        let join_problem = (crdt_fingerprint(&backward) != fingerprint || backward.visible_graph() != graph)
-            .then(|| "joining the deltas in reverse order gives another state".to_owned());
-        let ops: Vec<OpRecord> =
-            self.seed.ops.iter().map(|op| (**op).clone()).chain(issued.iter().map(|i| (*i.record).clone())).collect();
-        let ids: BTreeSet<OpId> = ops.iter().map(|op| op.id).collect();
-        let closed = ops.iter().all(|op| op.past.is_subset(&ids));
-        let spec_problem = closed
-            .then(|| spec::visible_graph(&ops))
-            .filter(|expected| *expected != graph)
-            .map(|expected| format!("the specification shows {expected:?}"));
-        Oracle { fingerprint, graph, join_problem, spec_problem }
-    }
-}
-
 type State = ActorModelState<ReplicaActor>;
-
-/// Every operation issued so far (the seed's included).
-fn all_ops(setup: &Setup, state: &State) -> Vec<OpRecord> {
-    issued_ops(setup, state).cloned().collect()
-}
-
-/// Every operation issued so far, by reference.
-fn issued_ops<'a>(setup: &'a Setup, state: &'a State) -> impl Iterator<Item = &'a OpRecord> + 'a {
-    setup
-        .seed
-        .ops
-        .iter()
-        .map(|op| &**op)
-        .chain(state.actor_states.iter().flat_map(|s| s.issued.iter().map(|op| &*op.record)))
-}
-
-/// Whether the operation budget is spent (clock advances and announces may be left).
-fn budgets_spent(setup: &Setup, state: &State) -> bool {
-    spent(state).0 == setup.config.ops
-}
-
-/// Nothing is left to deliver that would change anything: every delta's operation and every snapshot's operations
-/// were applied by the destination, and every announce's answer would bring its sender nothing it has not applied
-/// by now (truncated copies change nothing). On a duplicating network every message stays deliverable, so this
-/// is about what delivering them again would do.
-fn quiescent(state: &State) -> bool {
-    state.network.iter_all().all(|envelope| {
-        let dst = &state.actor_states[usize::from(envelope.dst)];
-        match &envelope.msg {
-            Msg::Delta { op, .. } => dst.seen.contains(op),
-            Msg::Damaged { .. } => true,
-            Msg::Announce { .. } => dst.seen.is_subset(&state.actor_states[usize::from(envelope.src)].seen),
-            Msg::Snapshot { seen, .. } => seen.is_subset(&dst.seen),
-        }
-    })
-}
-
-/// The replicas as they are, or (lossy network) after reliable rounds of their own anti-entropy.
-fn settled_replicas(setup: &Setup, state: &State) -> Vec<Replica> {
-    let mut replicas: Vec<Replica> = state.actor_states.iter().map(|s| s.replica.clone()).collect();
-    if setup.config.network == NetworkKind::Lossy {
-        for _round in 0..2 {
-            for from in 0..replicas.len() {
-                for to in 0..replicas.len() {
-                    if from == to {
-                        continue;
-                    }
-                    let missing = replicas[from].missing_for(replicas[to].applied());
-                    let snapshot = matches!(missing, Missing::Snapshot).then(|| replicas[from].encode_snapshot());
-                    let target = &mut replicas[to];
-                    match missing {
-                        Missing::UpToDate => {}
-                        Missing::Deltas(deltas) => {
-                            for delta in deltas {
-                                if let Ok(delta) = Delta::decode(&delta.encode()) {
-                                    let _ = target.apply(&delta);
-                                }
-                            }
-                        }
-                        Missing::Snapshot => {
-                            if let Some(Ok(snapshot)) = snapshot.map(|bytes| Delta::decode(&bytes)) {
-                                let _ = target.apply(&snapshot);
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
-    replicas
-}
-
-fn invariants_hold(model: &ConvergenceModel, state: &State) -> bool {
-    let deleted: Vec<(OpId, NodeId)> = issued_ops(&model.inner.cfg, state)
-        .filter_map(|op| match op.kind {
-            OpKind::DeleteNode { id } => Some((op.id, id)),
-            _ => None,
-        })
-        .collect();
-    state.actor_states.iter().all(|s| {
-        s.replica.check_invariants().is_ok()
-            && deleted.iter().all(|(op, id)| !s.seen.contains(op) || s.replica.node(*id).is_none())
-    })
-}
-
-fn no_delta_refused(_: &ConvergenceModel, state: &State) -> bool {
-    state.actor_states.iter().all(|s| s.refused.is_empty())
-}
-
-fn damaged_refused(_: &ConvergenceModel, state: &State) -> bool {
-    state.actor_states.iter().all(|s| s.damaged_accepted.is_empty())
-}
-
-fn change_events_complete(_: &ConvergenceModel, state: &State) -> bool {
-    state.actor_states.iter().all(|s| s.events_incomplete.is_empty())
-}
-
-fn stamps_follow_causality(_: &ConvergenceModel, state: &State) -> bool {
-    // Each replica's own operations, with every operation it had seen: those are the pairs a stamp must order.
-    let stamps: BTreeMap<OpId, dsr::Stamp> =
-        state.actor_states.iter().flat_map(|s| s.issued.iter().map(|op| (op.record.id, op.record.stamp))).collect();
-    state
-        .actor_states
-        .iter()
-        .flat_map(|s| s.issued.iter())
-        .all(|op| op.record.past.iter().all(|earlier| stamps.get(earlier).is_none_or(|stamp| *stamp < op.record.stamp)))
-}
-
-fn same_ops_same_graph(_: &ConvergenceModel, state: &State) -> bool {
-    let replicas = &state.actor_states;
-    (0..replicas.len()).all(|a| {
-        (a + 1..replicas.len()).all(|b| {
-            replicas[a].seen != replicas[b].seen
-                || (replicas[a].graph.0 == replicas[b].graph.0
-                    && replicas[a].graph.0.digest() == replicas[b].graph.0.digest())
-        })
-    })
-}
-
-fn equal_to_fresh_join(model: &ConvergenceModel, state: &State) -> bool {
-    state.actor_states.iter().all(|s| {
-        let oracle = model.inner.cfg.oracle(state, &s.seen);
-        oracle.join_problem.is_none()
-            && oracle.fingerprint == crdt_fingerprint(&s.replica)
-            && oracle.graph == *s.graph.0
-    })
-}
-
-fn matches_spec_everywhere(model: &ConvergenceModel, state: &State) -> bool {
-    state.actor_states.iter().all(|s| {
-        let oracle = model.inner.cfg.oracle(state, &s.seen);
-        oracle.spec_problem.is_none() && oracle.graph == *s.graph.0
-    })
-}
-
-fn late_joiner_equals(model: &ConvergenceModel, state: &State) -> bool {
-    state.actor_states.iter().all(|s| {
-        let key = crdt_fingerprint(&s.replica);
-        if let Some(verdict) = model.inner.cfg.cache.installs.lock().expect("cache lock").get(&key) {
-            return verdict.is_none();
-        }
-        let verdict = late_join_problem(&model.inner.cfg, &s.replica, &s.graph.0);
-        let mut cache = model.inner.cfg.cache.installs.lock().expect("cache lock");
-        if cache.len() >= CACHE_LIMIT {
-            cache.clear();
-        }
-        cache.insert(key, verdict.clone());
-        verdict.is_none()
-    })
-}
-
-/// Installs `replica`'s encoded snapshot into a fresh replica (with the same planted mutant) and compares.
-fn late_join_problem(setup: &Setup, replica: &Replica, graph: &VisibleGraph) -> Option<String> {
-    let snapshot = match Delta::decode(&replica.encode_snapshot()) {
-        Ok(snapshot) => snapshot,
-        Err(error) => return Some(format!("the snapshot does not decode: {error}")),
-    };
-    let mut joiner = Replica::new(ReplicaId(998));
-    #[cfg(feature = "mutants")]
-    joiner.plant_mutant(setup.config.planted);
-    #[cfg(not(feature = "mutants"))]
-    let _ = setup;
-    if let Err(error) = joiner.apply(&snapshot) {
-        return Some(format!("the snapshot is refused: {error}"));
-    }
-    if crdt_fingerprint(&joiner) != crdt_fingerprint(replica) || joiner.visible_graph() != *graph {
-        return Some("the late joiner differs".to_owned());
-    }
-    None
-}
-
-fn quiescent_replicas_converge(model: &ConvergenceModel, state: &State) -> bool {
-    if !(budgets_spent(&model.inner.cfg, state) && quiescent(state)) {
-        return true;
-    }
-    let replicas = settled_replicas(&model.inner.cfg, state);
-    replicas.windows(2).all(|pair| pair[0].digest() == pair[1].digest())
-}
-
-fn quiescent_replicas_match_spec(model: &ConvergenceModel, state: &State) -> bool {
-    if !(budgets_spent(&model.inner.cfg, state) && quiescent(state)) {
-        return true;
-    }
-    let ops = all_ops(&model.inner.cfg, state);
-    let expected = spec::visible_graph(&ops);
-    let settled = settled_replicas(&model.inner.cfg, state);
-    // Convergence means every operation was applied everywhere, not only equal graphs.
-    settled.iter().all(|r| r.visible_graph() == expected && ops.iter().all(|op| r.applied().contains(op.id)))
-}
-
-fn conflicts_happen(model: &ConvergenceModel, state: &State) -> bool {
-    let ops = all_ops(&model.inner.cfg, state);
-    let order = spec::CausalOrder::new(&ops);
-    ops.iter().enumerate().any(|(i, a)| {
-        ops[i + 1..]
-            .iter()
-            .any(|b| a.replica != b.replica && order.concurrent(a.id, b.id) && spec::conflict(&a.kind, &b.kind))
-    })
-}
-
-fn snapshot_answered(model: &ConvergenceModel, state: &State) -> bool {
-    // Vacuous without announces; with them, a history too short for the gap must be seen to fall back.
-    model.setup().config.syncs == 0 || state.network.iter_all().any(|e| matches!(e.msg, Msg::Snapshot { .. }))
-}
-
-fn quiescent_end_reached(model: &ConvergenceModel, state: &State) -> bool {
-    budgets_spent(&model.inner.cfg, state) && quiescent(state)
-}
-
-/// The property names, for tests and the mutant check.
-pub mod properties {
-    /// Invariants on every replica state.
-    pub const INVARIANTS: &str = "every state: no dangling edge, unique names, deleted nodes invisible";
-    /// No delta is refused.
-    pub const NO_REFUSAL: &str = "every delta and snapshot decodes and is accepted";
-    /// Damaged deltas are refused.
-    pub const DAMAGED: &str = "every truncated delta is refused and leaves the replica unchanged";
-    /// Stamps respect causality.
-    pub const STAMPS: &str = "an operation's stamp is above those it saw";
-    /// Strong eventual consistency on every state.
-    pub const SEC: &str = "every state: replicas that applied the same operations show equal graphs and digests";
-    /// Each replica equals the join of its deltas.
-    pub const FRESH: &str = "every state: each replica equals a fresh replica joining its deltas (either order)";
-    /// Each replica equals the specification of what it applied.
-    pub const SPEC_EVERY: &str =
-        "every state: a replica that applied a causally closed set of operations shows their specification";
-    /// A late joiner installing a snapshot equals its source.
-    pub const LATE_JOIN: &str = "every state: a fresh replica installing a replica's snapshot equals it";
-    /// Change events are complete.
-    pub const EVENTS: &str = "every step: the change events turn the previous visible graph into the new one";
-    /// Convergence at quiescence.
-    pub const CONVERGE: &str = "quiescent, budget spent: all replicas have equal digests";
-    /// Agreement with the specification at quiescence.
-    pub const SPEC: &str =
-        "quiescent, budget spent: every replica applied every operation and equals the specification";
-    /// Conflicts are explored.
-    pub const CONFLICTS: &str = "concurrent conflicting operations happen";
-    /// Anti-entropy falls back to a snapshot (with announces).
-    pub const SNAPSHOT: &str = "an announce is answered with a snapshot (when announces are allowed)";
-    /// The quiescent end is reached (the quiescent properties are not vacuous).
-    pub const END: &str = "a quiescent state with the budget spent is reached";
-}
 
 /// The convergence model: Stateright's actor model of the replicas, with the checker's choices limited to the
 /// budgets left (an operation, clock advance or announce past its budget is not even computed).
@@ -1141,7 +801,7 @@ pub fn model(config: &ConvergenceConfig) -> ConvergenceModel {
         NetworkKind::UnorderedNonduplicating | NetworkKind::Lossy => Network::new_unordered_nonduplicating([]),
     };
     let lossy = if config.network == NetworkKind::Lossy { LossyNetwork::Yes } else { LossyNetwork::No };
-    let setup = Setup { config: config.clone(), seed, cache: Arc::new(OracleCache::default()) };
+    let setup = Setup::new(config.clone(), seed);
     let inner = ActorModel::new(setup, ()).actors(actors).init_network(network).lossy_network(lossy);
     ConvergenceModel { inner }
 }
