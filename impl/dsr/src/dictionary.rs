@@ -2,12 +2,19 @@
 //!
 //! One table (the `builtin_attributes!` table below) is the single source of truth. It generates the typed keys in
 //! [`attrs`] — so `replica.set_attr(now, node, attrs::RT_TRANSLATION, "text")` does not compile — and the run-time
-//! table that checks names met in JSON files and network deltas. A [`Dictionary`] starts from the built-in table;
-//! names it does not know are rejected unless the user allows unknown names, in which case an unknown attribute
-//! name is registered with the type it is first seen with, and a later, different type for it is an error.
+//! table that checks the names of local operations. A [`Dictionary`] starts from the built-in table and *learns*
+//! the names of the graph it holds: every node type, edge type and attribute name (with its value type) that
+//! arrives in a remote delta or a lenient JSON import ([`crate::json`]) joins it. A local operation may use a
+//! name only if the built-in table or the graph knows it (unless the user allows unknown names, in which case an
+//! unknown attribute name is registered with the type it is first written with).
 //!
-//! Replicas that exchange deltas must agree on the types of the names they use: a remote delta that gives a known
-//! name another type is rejected whole (see [`crate::DeltaError`]).
+//! An attribute name has one *declared* type (the built-in one, or the type it was first learned with) and may
+//! have been learned with other types too: real CORTEX files of different eras store, say, `parent` as u32 or
+//! u64. A value of a learned type is accepted under that name like one of the declared type; any other type is a
+//! [`DictionaryError::AttrTypeConflict`].
+//!
+//! Remote deltas are never refused for their names or types (only for malformed names): what a replica accepts
+//! from the network does not depend on what it happened to learn first, which keeps the join order-independent.
 
 use std::collections::{HashMap, HashSet};
 use std::marker::PhantomData;
@@ -253,6 +260,8 @@ pub const BUILTIN_EDGE_TYPES: &[&str] = &["RT", "has", "in", "sees", "looking_at
 #[derive(Clone, Debug)]
 pub struct Dictionary {
     attrs: HashMap<Name, ValueType>,
+    /// Types other than the declared one that a name was learned with, by name (rare, so a short list each).
+    learned_types: HashMap<Name, Vec<ValueType>>,
     node_types: HashSet<Name>,
     edge_types: HashSet<Name>,
     allow_unknown: bool,
@@ -269,6 +278,7 @@ impl Dictionary {
     pub fn builtin() -> Self {
         Dictionary {
             attrs: BUILTIN_ATTRIBUTES.iter().map(|(name, ty)| (Name::new(name), *ty)).collect(),
+            learned_types: HashMap::new(),
             node_types: BUILTIN_NODE_TYPES.iter().map(|name| Name::new(name)).collect(),
             edge_types: BUILTIN_EDGE_TYPES.iter().map(|name| Name::new(name)).collect(),
             allow_unknown: false,
@@ -323,9 +333,55 @@ impl Dictionary {
         Ok(())
     }
 
-    /// The value type of an attribute name, if known.
+    /// The declared value type of an attribute name, if known.
     pub fn attr_type(&self, name: &str) -> Option<ValueType> {
         self.attrs.get(name).copied()
+    }
+
+    /// The types other than the declared one that `name` was learned with (empty for most names).
+    pub fn learned_types(&self, name: &str) -> &[ValueType] {
+        self.learned_types.get(name).map_or(&[], Vec::as_slice)
+    }
+
+    /// Whether a known name accepts values of `value_type`: its declared type or one it was learned with.
+    fn accepts(&self, known: ValueType, name: &str, value_type: ValueType) -> bool {
+        known == value_type || self.learned_types(name).contains(&value_type)
+    }
+
+    /// Learns an attribute name with a value type from the graph (a remote delta or a file): an unknown name is
+    /// declared with that type, a known name of another type accepts that type from now on. Returns the shared
+    /// name.
+    ///
+    /// # Errors
+    /// [`DictionaryError::InvalidName`] for an empty, over-long or control-character name.
+    pub fn learn_attr(&mut self, name: &str, value_type: ValueType) -> Result<Name, DictionaryError> {
+        let Some((known_name, known)) = self.attrs.get_key_value(name) else {
+            validate_name("attribute name", name)?;
+            let interned = Name::new(name);
+            self.attrs.insert(interned.clone(), value_type);
+            return Ok(interned);
+        };
+        let known_name = known_name.clone();
+        if !self.accepts(*known, name, value_type) {
+            self.learned_types.entry(known_name.clone()).or_default().push(value_type);
+        }
+        Ok(known_name)
+    }
+
+    /// Learns a node type from the graph; returns the shared name.
+    ///
+    /// # Errors
+    /// [`DictionaryError::InvalidName`].
+    pub fn learn_node_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
+        check_type(&mut self.node_types, true, name, "node type")
+    }
+
+    /// Learns an edge type from the graph; returns the shared name.
+    ///
+    /// # Errors
+    /// [`DictionaryError::InvalidName`].
+    pub fn learn_edge_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
+        check_type(&mut self.edge_types, true, name, "edge type")
     }
 
     /// Checks an attribute name and value type, registering an unknown name when allowed; returns the shared name.
@@ -334,7 +390,7 @@ impl Dictionary {
     /// [`DictionaryError::UnknownAttr`] or [`DictionaryError::AttrTypeConflict`].
     pub fn check_attr(&mut self, name: &str, value_type: ValueType) -> Result<Name, DictionaryError> {
         if let Some((known_name, known)) = self.attrs.get_key_value(name) {
-            return if *known == value_type {
+            return if self.accepts(*known, name, value_type) {
                 Ok(known_name.clone())
             } else {
                 Err(DictionaryError::AttrTypeConflict { name: name.to_owned(), known: *known, found: value_type })
@@ -355,7 +411,7 @@ impl Dictionary {
     /// As [`Dictionary::check_attr`].
     pub fn peek_attr(&self, name: &str, value_type: ValueType) -> Result<(), DictionaryError> {
         match self.attrs.get(name) {
-            Some(known) if *known == value_type => Ok(()),
+            Some(known) if self.accepts(*known, name, value_type) => Ok(()),
             Some(known) => {
                 Err(DictionaryError::AttrTypeConflict { name: name.to_owned(), known: *known, found: value_type })
             }
@@ -386,7 +442,7 @@ impl Dictionary {
     /// [`DictionaryError::AttrTypeConflict`] if it is known with another type.
     pub fn known_attr(&self, name: &str, value_type: ValueType) -> Result<Option<Name>, DictionaryError> {
         match self.attrs.get_key_value(name) {
-            Some((known_name, known)) if *known == value_type => Ok(Some(known_name.clone())),
+            Some((known_name, known)) if self.accepts(*known, name, value_type) => Ok(Some(known_name.clone())),
             Some((_, known)) => {
                 Err(DictionaryError::AttrTypeConflict { name: name.to_owned(), known: *known, found: value_type })
             }
@@ -450,7 +506,8 @@ pub(crate) fn intern_type(text: &str) -> Name {
 /// The longest name accepted, in bytes.
 pub const MAX_NAME_LEN: usize = 255;
 
-fn validate_name(what: &'static str, name: &str) -> Result<(), DictionaryError> {
+/// Checks that a name can be held: 1 to [`MAX_NAME_LEN`] bytes, no control characters.
+pub(crate) fn validate_name(what: &'static str, name: &str) -> Result<(), DictionaryError> {
     if name.is_empty() || name.len() > MAX_NAME_LEN || name.chars().any(char::is_control) {
         return Err(DictionaryError::InvalidName { what, name: name.chars().take(64).collect() });
     }

@@ -12,12 +12,12 @@ use smallvec::SmallVec;
 
 use crate::causal::CausalContext;
 use crate::delta::{Delta, DeltaParts, Origin};
-use crate::dictionary::{AttrKey, Dictionary, MAX_NAME_LEN};
+use crate::dictionary::{AttrKey, Dictionary, MAX_NAME_LEN, validate_name};
 use crate::error::{DeltaError, DictionaryError, OpError};
 use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
 use crate::mutants::{DsrMutant, Plant};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store, drop_covered_attrs, join_attrs};
-use crate::value::{AttrType, Value};
+use crate::value::{AttrType, Value, ValueType};
 
 /// Whether `name` is acceptable as a node name: 1 to 255 bytes, no control characters, no `#`.
 pub fn valid_node_name(name: &str) -> bool {
@@ -733,10 +733,7 @@ impl Replica {
     fn install(&mut self, delta: Delta) -> Result<(), DeltaError> {
         debug_assert!(self.can_install(&delta));
         self.check_names(&delta)?;
-        if self.dictionary.allows_unknown() {
-            register_names(Arc::make_mut(&mut self.dictionary), &delta)
-                .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
-        }
+        learn_names(&mut self.dictionary, &delta);
         let Delta { clock, ctx, applied, store, .. } = delta;
         let Store { mut tombstones, mut nodes, mut edges } = store;
         if self.plant.is(DsrMutant::InstallDropsTombstones) {
@@ -817,11 +814,7 @@ impl Replica {
 
     fn apply_inner(&mut self, delta: &Delta, shared: impl FnOnce() -> Arc<Delta>) -> Result<(), DeltaError> {
         self.check_names(delta)?;
-        if self.dictionary.allows_unknown() {
-            // Register new names only once the whole delta has passed.
-            register_names(Arc::make_mut(&mut self.dictionary), delta)
-                .map_err(|source| DeltaError::Dictionary { place: "delta".into(), source })?;
-        }
+        learn_names(&mut self.dictionary, delta);
         let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)));
         self.join(delta);
         for dot in delta.origin.iter().flat_map(Origin::dots) {
@@ -840,52 +833,29 @@ impl Replica {
         Ok(())
     }
 
-    /// Checks every name and type of a delta against the dictionary, changing nothing.
-    ///
-    /// A snapshot repeats a few types and attribute names over many nodes: a type, or a known attribute name with its
-    /// type, that has passed once is remembered (a few of them) and not looked up again, since the check is a pure
-    /// function of the unchanged dictionary.
+    /// Checks that every name of a delta can be held (see [`crate::dictionary::validate_name`]), changing nothing.
+    /// Names and types are not checked against the dictionary: the network is never refused for them (the
+    /// dictionary's module documentation says why), they are learned after the join ([`learn_names`]).
     fn check_names(&self, delta: &Delta) -> Result<(), DeltaError> {
+        let refused = |place: String| move |source| DeltaError::Dictionary { place, source };
         let attrs = |attrs: &Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
-            let mut first_types = BTreeMap::new();
-            for (name, register) in attrs {
-                for entry in &register.values {
-                    let ty = entry.value.value_type();
-                    // A known name of its own type, the common case: one lookup.
-                    if self.dictionary.attr_type(name) == Some(ty) {
-                        continue;
-                    }
-                    let place = || format!("{} attribute {name:?}", owner());
-                    self.dictionary
-                        .peek_attr(name, ty)
-                        .map_err(|source| DeltaError::Dictionary { place: place(), source })?;
-                    // Two values of different types for one unknown name within a delta is a conflict too.
-                    if let Some(first) = first_types.insert(name.clone(), ty).filter(|first| *first != ty) {
-                        return Err(DeltaError::Dictionary {
-                            place: place(),
-                            source: DictionaryError::AttrTypeConflict {
-                                name: name.to_string(),
-                                known: first,
-                                found: ty,
-                            },
-                        });
-                    }
-                }
+            for name in attrs.keys().filter(|name| self.dictionary.attr_type(name).is_none()) {
+                validate_name("attribute name", name).map_err(refused(format!("{} attribute {name:?}", owner())))?;
             }
             Ok(())
         };
         for (id, node) in &delta.store.nodes {
-            for core in &node.core.values {
-                self.dictionary
-                    .peek_node_type(&core.value.node_type)
-                    .map_err(|source| DeltaError::Dictionary { place: format!("node {id}"), source })?;
+            for core in
+                node.core.values.iter().filter(|core| self.dictionary.known_node_type(&core.value.node_type).is_none())
+            {
+                validate_name("node type", &core.value.node_type).map_err(refused(format!("node {id}")))?;
             }
             attrs(&node.attrs, &|| format!("node {id}"))?;
         }
         for (key, edge) in &delta.store.edges {
-            self.dictionary
-                .peek_edge_type(&key.edge_type)
-                .map_err(|source| DeltaError::Dictionary { place: format!("edge {key}"), source })?;
+            if self.dictionary.known_edge_type(&key.edge_type).is_none() {
+                validate_name("edge type", &key.edge_type).map_err(refused(format!("edge {key}")))?;
+            }
             attrs(&edge.attrs, &|| format!("edge {key}"))?;
         }
         Ok(())
@@ -1405,26 +1375,43 @@ fn group_sorted<K: Ord, T: Ord>(pairs: impl Iterator<Item = (K, T)>) -> BTreeMap
 }
 
 /// Registers the names of a delta that passed [`Replica::check_names`] (only needed when unknown names are allowed).
-fn register_names(dictionary: &mut Dictionary, delta: &Delta) -> Result<(), DictionaryError> {
-    for node in delta.store.nodes.values() {
-        for core in &node.core.values {
-            dictionary.check_node_type(&core.value.node_type)?;
-        }
-        for (name, register) in &node.attrs {
-            for entry in &register.values {
-                dictionary.check_attr(name, entry.value.value_type())?;
-            }
-        }
+/// Learns every name and attribute type of a delta that [`Replica::check_names`] passed (so none can fail),
+/// copying the shared dictionary only if something is new.
+fn learn_names(dictionary: &mut Arc<Dictionary>, delta: &Delta) {
+    let known = |dictionary: &Dictionary, name: &str, value_type: ValueType| {
+        dictionary.attr_type(name) == Some(value_type) || dictionary.learned_types(name).contains(&value_type)
+    };
+    let node_attrs = delta.store.nodes.values().map(|node| &node.attrs);
+    let all_attrs = node_attrs.chain(delta.store.edges.values().map(|edge| &edge.attrs));
+    let attrs: Vec<(&Name, ValueType)> = all_attrs
+        .flat_map(|attrs| attrs.iter())
+        .flat_map(|(name, register)| register.values.iter().map(move |entry| (name, entry.value.value_type())))
+        .filter(|(name, value_type)| !known(dictionary, name, *value_type))
+        .collect();
+    let node_types: Vec<&Name> = (delta.store.nodes.values())
+        .flat_map(|node| node.core.values.iter().map(|core| &core.value.node_type))
+        .filter(|name| dictionary.known_node_type(name).is_none())
+        .collect();
+    let edge_types: Vec<&Name> = delta
+        .store
+        .edges
+        .keys()
+        .map(|key| &key.edge_type)
+        .filter(|name| dictionary.known_edge_type(name).is_none())
+        .collect();
+    if attrs.is_empty() && node_types.is_empty() && edge_types.is_empty() {
+        return;
     }
-    for (key, edge) in &delta.store.edges {
-        dictionary.check_edge_type(&key.edge_type)?;
-        for (name, register) in &edge.attrs {
-            for entry in &register.values {
-                dictionary.check_attr(name, entry.value.value_type())?;
-            }
-        }
+    let dictionary = Arc::make_mut(dictionary);
+    for (name, value_type) in attrs {
+        dictionary.learn_attr(name, value_type).expect("checked by check_names");
     }
-    Ok(())
+    for name in node_types {
+        dictionary.learn_node_type(name).expect("checked by check_names");
+    }
+    for name in edge_types {
+        dictionary.learn_edge_type(name).expect("checked by check_names");
+    }
 }
 
 fn element_store(element: &Element, registers: Attrs) -> Store {
