@@ -61,6 +61,7 @@ use std::sync::Arc;
 use serde::{Serialize, Serializer};
 
 use crate::delta::Delta;
+use crate::dictionary::Dictionary;
 use crate::error::{DictionaryError, OpError};
 use crate::ids::{EdgeKey, NodeId};
 use crate::kinematics::RT;
@@ -94,6 +95,41 @@ pub struct CortexNode {
     pub attrs: Attributes,
 }
 
+/// How much of the real world's variety a read ([`read`]) or an import ([`CortexGraph::import_with`]) accepts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Strictness {
+    /// What the C++ loader accepts, with a [`JsonWarning`] for everything converted, skipped or learnt (see the
+    /// module documentation). The default: files of every CORTEX era are in use, and a user's own types are normal.
+    #[default]
+    Lenient,
+    /// Only files that need no warning: everything the lenient rules accept is an error.
+    Strict,
+}
+
+/// Something a lenient read or import accepted with a conversion, a skip or a new name, and where.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct JsonWarning {
+    /// Where, as a path like the errors'.
+    pub path: String,
+    /// What was done.
+    pub what: String,
+}
+
+impl fmt::Display for JsonWarning {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.path, self.what)
+    }
+}
+
+/// A file read by [`read`]: the graph, and what was accepted with a warning.
+#[derive(Clone, Debug)]
+pub struct Reading {
+    /// The graph.
+    pub graph: CortexGraph,
+    /// In document order.
+    pub warnings: Vec<JsonWarning>,
+}
+
 /// What went wrong reading, importing or writing CORTEX JSON, and where.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum JsonError {
@@ -106,6 +142,13 @@ pub enum JsonError {
         column: usize,
         /// What the parser found.
         what: String,
+    },
+    /// `symbols` as an array of symbols with `key`/`value` attribute lists: the format of CORTEX's predecessor,
+    /// which the C++ loader does not read either (it loads an empty graph from such a file).
+    #[error("{path}: an array of symbols is the older AGM format, not CORTEX's (symbols is an object keyed by id)")]
+    OldFormat {
+        /// Where the array is.
+        path: String,
     },
     /// An object lacks a field the format requires.
     #[error("{path}: missing field {field:?}")]
@@ -283,4 +326,4 @@ mod read;
 pub use analysis::{AttributeCount, DanglingLink, GraphAnalysis, SeveralParents, TypeCount};
 pub use export::export;
 pub use import::ImportReport;
-pub use read::{parse, parse_bytes};
+pub use read::{parse, parse_bytes, read};

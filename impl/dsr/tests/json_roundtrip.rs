@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use dsr::json::{self, Attributes, CortexGraph, CortexNode, JsonError};
+use dsr::json::{self, Attributes, CortexGraph, CortexNode, JsonError, JsonWarning, Strictness};
 use dsr::{Dictionary, EdgeKey, NodeId, Replica, ReplicaId, Value};
 use proptest::prelude::*;
 
@@ -29,12 +29,21 @@ fn fixture(name: &str) -> Vec<u8> {
     std::fs::read(&path).unwrap_or_else(|error| panic!("cannot read {}: {error}", path.display()))
 }
 
-/// Parses and imports into a fresh replica with the built-in dictionary.
+/// Parses and imports strictly into a fresh replica with the built-in dictionary.
 fn load(bytes: &[u8], replica_id: u32) -> Result<Replica, JsonError> {
     let graph = json::parse_bytes(bytes)?;
     let mut replica = Replica::new(ReplicaId(replica_id));
-    graph.import_into(&mut replica, 1_000)?;
+    graph.import_with(&mut replica, 1_000, Strictness::Strict)?;
     Ok(replica)
+}
+
+/// Reads and imports leniently into a fresh replica with the built-in dictionary; returns the replica and every
+/// warning of the read and the import.
+fn load_lenient(bytes: &[u8]) -> Result<(Replica, Vec<JsonWarning>), JsonError> {
+    let reading = json::read(bytes, Strictness::Lenient)?;
+    let mut replica = Replica::new(ReplicaId(1));
+    let report = reading.graph.import_into(&mut replica, 1_000)?;
+    Ok((replica, reading.warnings.into_iter().chain(report.warnings).collect()))
 }
 
 #[test]
@@ -176,6 +185,52 @@ const MALFORMED: &[(&str, &[&str])] = &[
     ("unknown_node_type.json", &["DSRModel.symbols[\"12\"].type: unknown node type \"spaceship\""]),
 ];
 
+/// Fixtures that only the strict rules refuse: what the lenient ones do instead, as warnings naming the place.
+const LENIENT: &[(&str, &[&str])] = &[
+    ("float_for_int32.json", &["attribute[\"level\"].value: the number 1.5 is rounded to 2 (i32)"]),
+    (
+        "duplicate_attribute_same_value.json",
+        &["symbols[\"12\"].attribute: key \"pos_x\" appears twice with the same value"],
+    ),
+    ("link_src_differs.json", &["links[0].src: the link is listed under symbol 1 but starts at 12; read as 12's"]),
+    (
+        "dangling_dst.json",
+        &["links[dst=99, label=\"RT\"].dst: node 99 does not exist in the file or the replica: the link is skipped"],
+    ),
+    (
+        "unknown_attribute.json",
+        &[
+            "attribute[\"favourite_colour\"]: unknown attribute name \"favourite_colour\" joins this graph's dictionary as string",
+        ],
+    ),
+    (
+        "attribute_type_conflict.json",
+        &["attribute[\"pos_x\"]: attribute \"pos_x\" has type", "and f32 in the dictionary: kept as"],
+    ),
+    (
+        "unknown_node_type.json",
+        &["symbols[\"12\"].type: unknown node type \"spaceship\" joins this graph's dictionary"],
+    ),
+];
+
+/// The lenient rules accept each of these with the warnings listed, and what they accept round-trips: written
+/// and read again it is the same graph, with no conversion warning the second time.
+#[test]
+fn lenient_loading_accepts_what_the_cpp_loader_does_and_says_so() {
+    for (name, expected) in LENIENT {
+        let (replica, warnings) = load_lenient(&fixture(name)).unwrap_or_else(|error| panic!("{name}: {error}"));
+        let text: Vec<String> = warnings.iter().map(ToString::to_string).collect();
+        for part in *expected {
+            assert!(text.iter().any(|warning| warning.contains(part)), "{name}: warnings {text:?} lack {part:?}");
+        }
+        let written = json::export(&replica).unwrap();
+        let (again, warnings) = load_lenient(written.as_bytes()).unwrap();
+        assert_eq!(again.digest(), replica.digest(), "{name}: the round trip changed the graph");
+        let conversions: Vec<&JsonWarning> = warnings.iter().filter(|w| !w.what.contains("dictionary")).collect();
+        assert!(conversions.is_empty(), "{name}: written back, it still needs conversions: {conversions:?}");
+    }
+}
+
 #[test]
 fn malformed_files_are_refused_with_the_place_named() {
     for (name, expected) in MALFORMED {
@@ -193,7 +248,7 @@ fn malformed_files_are_refused_with_the_place_named() {
 #[test]
 fn every_fixture_is_tested() {
     let mut listed: Vec<&str> = MALFORMED.iter().map(|(name, _)| *name).collect();
-    listed.extend(["valid_small.json", "bom_valid.json"]);
+    listed.extend(["valid_small.json", "bom_valid.json", "duplicate_attribute_same_value.json"]);
     listed.sort_unstable();
     let directory = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/json");
     let mut present: Vec<String> =
@@ -216,30 +271,57 @@ fn a_byte_order_mark_is_skipped() {
     assert_eq!(with_mark.nodes.len(), 2);
 }
 
+/// Strictly, an unknown name is refused; leniently it joins the graph's dictionary, so that local calls may use
+/// it, while a name neither the built-in dictionary nor the graph knows is still refused.
 #[test]
-fn unknown_attribute_names_follow_the_dictionary() {
+fn unknown_names_from_a_file_join_the_graphs_dictionary() {
     let graph = json::parse_bytes(&fixture("unknown_attribute.json")).unwrap();
     let mut strict = Replica::new(ReplicaId(1));
-    assert!(matches!(graph.import_into(&mut strict, 1), Err(JsonError::Dictionary { .. })));
-    let mut permissive = Replica::with_dictionary(ReplicaId(1), Dictionary::permissive());
-    graph.import_into(&mut permissive, 1).unwrap();
-    let robot = permissive.node(NodeId(12)).unwrap();
+    let error = graph.import_with(&mut strict, 1, Strictness::Strict).unwrap_err();
+    assert!(matches!(error, JsonError::Dictionary { .. }), "{error}");
+    assert_eq!((strict.node_count(), strict.dictionary().attr_type("favourite_colour")), (0, None));
+
+    let mut replica = Replica::new(ReplicaId(1));
+    let report = graph.import_into(&mut replica, 1).unwrap();
+    assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
+    let robot = replica.node(NodeId(12)).unwrap();
     assert_eq!(robot.attr("favourite_colour"), Some(&Value::from("red")));
+    replica.set_attrs(2, NodeId(12), [("favourite_colour", Value::from("blue"))]).unwrap();
+    let refused = replica.set_attrs(3, NodeId(12), [("favourite_food", Value::from("soup"))]).unwrap_err();
+    assert!(refused.to_string().contains("unknown attribute name \"favourite_food\""), "{refused}");
+    let wrong_type = replica.set_attrs(3, NodeId(12), [("favourite_colour", Value::I32(1))]).unwrap_err();
+    assert!(wrong_type.to_string().contains("has type string, not i32"), "{wrong_type}");
 }
 
+/// A name met with two types: strictly refused before anything changes (the dictionary included); leniently
+/// the second type is kept, with a warning, and local writes of either type are accepted from then on.
 #[test]
-fn an_unknown_name_with_two_types_is_refused_before_anything_changes() {
+fn a_name_with_two_types_is_refused_strictly_and_kept_leniently() {
     let mut graph = json::parse_bytes(&fixture("valid_small.json")).unwrap();
     graph.nodes.get_mut(&NodeId(1)).unwrap().attrs.insert("mood".into(), Value::I32(1));
     graph.nodes.get_mut(&NodeId(12)).unwrap().attrs.insert("mood".into(), Value::from("calm"));
     let mut replica = Replica::with_dictionary(ReplicaId(1), Dictionary::permissive());
-    let error = graph.import_into(&mut replica, 1).unwrap_err().to_string();
+    let error = graph.import_with(&mut replica, 1, Strictness::Strict).unwrap_err().to_string();
     assert!(
         error.starts_with("DSRModel.symbols[\"12\"].attribute[\"mood\"]: attribute \"mood\" has type i32"),
         "{error}"
     );
     assert_eq!(replica.node_count(), 0);
     assert_eq!(replica.dictionary().attr_type("mood"), None, "the dictionary learnt a name of a refused import");
+
+    let mut replica = Replica::new(ReplicaId(1));
+    let report = graph.import_into(&mut replica, 1).unwrap();
+    let warnings: Vec<String> = report.warnings.iter().map(ToString::to_string).collect();
+    assert_eq!(
+        warnings,
+        [
+            "DSRModel.symbols[\"1\"].attribute[\"mood\"]: unknown attribute name \"mood\" joins this graph's dictionary as i32",
+            "DSRModel.symbols[\"12\"].attribute[\"mood\"]: attribute \"mood\" has type string here and i32 in the dictionary: kept as string",
+        ]
+    );
+    assert_eq!(replica.node(NodeId(12)).unwrap().attr("mood"), Some(&Value::from("calm")));
+    replica.set_attrs(2, NodeId(1), [("mood", Value::from("glad"))]).unwrap();
+    replica.set_attrs(3, NodeId(12), [("mood", Value::I32(3))]).unwrap();
 }
 
 #[test]

@@ -3,7 +3,7 @@
 use super::*;
 
 /// A parsed JSON value that keeps every key of an object, in order, so duplicates can be reported.
-#[derive(Debug)]
+#[derive(Debug, PartialEq)]
 enum Json {
     Null,
     Bool(bool),
@@ -122,18 +122,6 @@ fn as_array<'a>(value: &'a Json, path: &str) -> Result<&'a [Json], JsonError> {
     }
 }
 
-/// An object whose keys have been checked to be distinct.
-fn unique_object<'a>(value: &'a Json, path: &str) -> Result<&'a [(String, Json)], JsonError> {
-    let fields = as_object(value, path)?;
-    let mut seen = BTreeSet::new();
-    for (key, _) in fields {
-        if !seen.insert(key.as_str()) {
-            return Err(JsonError::DuplicateKey { path: path.to_owned(), key: cut(key, 64) });
-        }
-    }
-    Ok(fields)
-}
-
 fn field<'a>(fields: &'a [(String, Json)], name: &'static str, path: &str) -> Result<&'a Json, JsonError> {
     fields
         .iter()
@@ -247,27 +235,58 @@ fn floats<const N: usize>(value: &Json, path: &str, value_type: ValueType) -> Re
     })
 }
 
-/// An attribute object `{"type": code, "value": v}` as a typed value.
-fn attribute(value: &Json, path: &str) -> Result<Value, JsonError> {
-    let fields = unique_object(value, path)?;
-    let code_path = format!("{path}.type");
-    let value_type = match field(fields, "type", path)? {
-        Json::Unsigned(code) => ValueType::from_code(*code)
-            .ok_or_else(|| JsonError::UnknownTypeCode { path: code_path, code: code.to_string() })?,
-        Json::Negative(code) => {
-            return Err(JsonError::UnknownTypeCode { path: code_path, code: code.to_string() });
+/// An attribute value of an integer type (i32, u32, or the items of a byte vector) with every fractional number
+/// rounded to the nearest integer, halves away from zero, as the C++ loader's conversion does; `None` if it holds
+/// no fractional number. Also returns how many numbers changed and the first of them.
+fn round_fractions(raw: &Json) -> Option<(Json, usize, f64)> {
+    let round = |value: &Json| match value {
+        Json::Float(number) if number.round() >= 0.0 && number.round() <= u64::MAX as f64 => {
+            Some((Json::Unsigned(number.round() as u64), *number))
         }
-        other => {
-            return Err(JsonError::WrongKind {
-                path: code_path,
-                expected: "an integer type code",
-                found: describe(other),
-            });
+        Json::Float(number) if number.round() >= i64::MIN as f64 => {
+            Some((Json::Negative(number.round() as i64), *number))
         }
+        _ => None,
     };
-    let raw = field(fields, "value", path)?;
-    let path = format!("{path}.value");
-    let scalar = |result: Result<Value, Problem>| result.map_err(|problem| problem.at(path.clone()));
+    match raw {
+        Json::Array(items) => {
+            let rounded: Vec<Option<(Json, f64)>> = items.iter().map(round).collect();
+            let count = rounded.iter().flatten().count();
+            let first = rounded.iter().flatten().next()?.1;
+            let items = rounded.into_iter().zip(items).map(|(new, old)| new.map_or_else(|| copy(old), |(new, _)| new));
+            Some((Json::Array(items.collect()), count, first))
+        }
+        scalar => round(scalar).map(|(json, original)| (json, 1, original)),
+    }
+}
+
+/// A copy of a scalar JSON value (the items of a byte vector).
+fn copy(value: &Json) -> Json {
+    match value {
+        Json::Null => Json::Null,
+        Json::Bool(flag) => Json::Bool(*flag),
+        Json::Unsigned(number) => Json::Unsigned(*number),
+        Json::Negative(number) => Json::Negative(*number),
+        Json::Float(number) => Json::Float(*number),
+        Json::String(text) => Json::String(text.clone()),
+        Json::Array(_) | Json::Object(_) => Json::Null,
+    }
+}
+
+/// A type code as a value type.
+fn type_code(value: &Json, path: String) -> Result<ValueType, JsonError> {
+    match value {
+        Json::Unsigned(code) => {
+            ValueType::from_code(*code).ok_or_else(|| JsonError::UnknownTypeCode { path, code: code.to_string() })
+        }
+        Json::Negative(code) => Err(JsonError::UnknownTypeCode { path, code: code.to_string() }),
+        other => Err(JsonError::WrongKind { path, expected: "an integer type code", found: describe(other) }),
+    }
+}
+
+/// A JSON value as a value of `value_type` (the file's type code), converted by the strict rules.
+fn typed_value(value_type: ValueType, raw: &Json, path: &str) -> Result<Value, JsonError> {
+    let scalar = |result: Result<Value, Problem>| result.map_err(|problem| problem.at(path.to_owned()));
     match value_type {
         ValueType::String => match raw {
             Json::String(text) => Ok(Value::String(Arc::from(text.as_str()))),
@@ -275,44 +294,104 @@ fn attribute(value: &Json, path: &str) -> Result<Value, JsonError> {
         },
         ValueType::I32 => scalar(integer::<i32>(raw, "i32").map(Value::I32)),
         ValueType::F32 => scalar(float32(raw).map(Value::F32)),
-        ValueType::VecF32 => Ok(Value::VecF32(items::<f32, Arc<[f32]>>(raw, &path, float32)?)),
+        ValueType::VecF32 => Ok(Value::VecF32(items::<f32, Arc<[f32]>>(raw, path, float32)?)),
         ValueType::Bool => match raw {
             Json::Bool(flag) => Ok(Value::Bool(*flag)),
             other => scalar(Err(Problem::Kind("true or false", describe(other)))),
         },
         ValueType::Bytes => {
-            let bytes: Vec<u8> = items(raw, &path, |item| integer::<u8>(item, "u8"))?;
+            let bytes: Vec<u8> = items(raw, path, |item| integer::<u8>(item, "u8"))?;
             Ok(Value::Bytes(bytes::Bytes::from(bytes)))
         }
         ValueType::U32 => scalar(integer::<u32>(raw, "u32").map(Value::U32)),
         ValueType::U64 => scalar(unsigned64(raw).map(Value::U64)),
         ValueType::F64 => scalar(number(raw).map(Value::F64)),
-        ValueType::VecU64 => Ok(Value::VecU64(items::<u64, Arc<[u64]>>(raw, &path, unsigned64)?)),
-        ValueType::F32x2 => Ok(Value::F32x2(floats(raw, &path, value_type)?)),
-        ValueType::F32x3 => Ok(Value::F32x3(floats(raw, &path, value_type)?)),
-        ValueType::F32x4 => Ok(Value::F32x4(floats(raw, &path, value_type)?)),
-        ValueType::F32x6 => Ok(Value::F32x6(floats(raw, &path, value_type)?)),
+        ValueType::VecU64 => Ok(Value::VecU64(items::<u64, Arc<[u64]>>(raw, path, unsigned64)?)),
+        ValueType::F32x2 => Ok(Value::F32x2(floats(raw, path, value_type)?)),
+        ValueType::F32x3 => Ok(Value::F32x3(floats(raw, path, value_type)?)),
+        ValueType::F32x4 => Ok(Value::F32x4(floats(raw, path, value_type)?)),
+        ValueType::F32x6 => Ok(Value::F32x6(floats(raw, path, value_type)?)),
     }
 }
 
-fn attributes(value: &Json, path: &str) -> Result<Attributes, JsonError> {
-    let mut attrs = Attributes::new();
-    for (name, attr) in unique_object(value, path)? {
-        let value = attribute(attr, &format!("{path}{}", key_segment(name)))?;
-        attrs.insert(name.clone(), value);
-    }
-    Ok(attrs)
+/// One read: how strict it is, and what it accepted with a warning.
+struct Reader {
+    strictness: Strictness,
+    warnings: Vec<JsonWarning>,
 }
 
-impl CortexGraph {
-    fn from_tree(root: &Json) -> Result<CortexGraph, JsonError> {
-        let root = unique_object(root, "document")?;
-        let model = unique_object(field(root, "DSRModel", "document")?, "DSRModel")?;
-        let symbols = as_object(field(model, "symbols", "DSRModel")?, "DSRModel.symbols")?;
+impl Reader {
+    fn lenient(&self) -> bool {
+        self.strictness == Strictness::Lenient
+    }
+
+    fn warn(&mut self, path: String, what: String) {
+        self.warnings.push(JsonWarning { path, what });
+    }
+
+    /// An object whose keys are distinct; leniently, a key repeated with the same value is read once (with a
+    /// warning), as any JSON reader that keeps one of them would; a key repeated with another value is refused,
+    /// since which one a reader keeps is not defined.
+    fn object<'a>(&mut self, value: &'a Json, path: &str) -> Result<&'a [(String, Json)], JsonError> {
+        let fields = as_object(value, path)?;
+        let mut seen: BTreeMap<&str, &Json> = BTreeMap::new();
+        for (key, value) in fields {
+            match seen.insert(key.as_str(), value) {
+                Some(first) if self.lenient() && first == value => {
+                    self.warn(
+                        path.to_owned(),
+                        format!("key {:?} appears twice with the same value; read once", cut(key, 64)),
+                    );
+                }
+                Some(_) => return Err(JsonError::DuplicateKey { path: path.to_owned(), key: cut(key, 64) }),
+                None => {}
+            }
+        }
+        Ok(fields)
+    }
+
+    /// An attribute object `{"type": code, "value": v}` as a value of the file's type code.
+    fn attribute(&mut self, value: &Json, path: &str) -> Result<Value, JsonError> {
+        let fields = self.object(value, path)?;
+        let value_type = type_code(field(fields, "type", path)?, format!("{path}.type"))?;
+        let raw = field(fields, "value", path)?;
+        let path = format!("{path}.value");
+        let integer_code = matches!(value_type, ValueType::I32 | ValueType::U32 | ValueType::Bytes);
+        if let Some((rounded, count, first)) = round_fractions(raw).filter(|_| self.lenient() && integer_code) {
+            let value = typed_value(value_type, &rounded, &path)?;
+            let what = match &rounded {
+                Json::Unsigned(integer) => format!("the number {first} is rounded to {integer} ({value_type})"),
+                Json::Negative(integer) => format!("the number {first} is rounded to {integer} ({value_type})"),
+                _ => format!(
+                    "{count} numbers with a fraction, the first {first}, are rounded to integers ({value_type})"
+                ),
+            };
+            self.warn(path, what);
+            return Ok(value);
+        }
+        typed_value(value_type, raw, &path)
+    }
+
+    fn attributes(&mut self, value: &Json, path: &str) -> Result<Attributes, JsonError> {
+        let mut attrs = Attributes::new();
+        for (name, attr) in self.object(value, path)? {
+            let value = self.attribute(attr, &format!("{path}{}", key_segment(name)))?;
+            attrs.insert(name.clone(), value);
+        }
+        Ok(attrs)
+    }
+
+    fn graph(&mut self, root: &Json) -> Result<CortexGraph, JsonError> {
+        let root = self.object(root, "document")?;
+        let model = self.object(field(root, "DSRModel", "document")?, "DSRModel")?;
+        let symbols = match field(model, "symbols", "DSRModel")? {
+            Json::Array(_) => return Err(JsonError::OldFormat { path: "DSRModel.symbols".into() }),
+            symbols => as_object(symbols, "DSRModel.symbols")?,
+        };
         let mut graph = CortexGraph::default();
         for (key, symbol) in symbols {
             let path = format!("DSRModel.symbols{}", key_segment(key));
-            let fields = unique_object(symbol, &path)?;
+            let fields = self.object(symbol, &path)?;
             let id_path = format!("{path}.id");
             let id = node_id(field(fields, "id", &path)?, &id_path)?;
             if decimal_u64(key) != Some(id.0) {
@@ -323,25 +402,12 @@ impl CortexGraph {
             }
             let node_type = string_field(fields, "type", &path)?.to_owned();
             let name = string_field(fields, "name", &path)?.to_owned();
-            let attrs = attributes(field(fields, "attribute", &path)?, &format!("{path}.attribute"))?;
+            let attrs = self.attributes(field(fields, "attribute", &path)?, &format!("{path}.attribute"))?;
             let links_path = format!("{path}.links");
             for (index, link) in as_array(field(fields, "links", &path)?, &links_path)?.iter().enumerate() {
-                let link_path = format!("{links_path}[{index}]");
-                let link_fields = unique_object(link, &link_path)?;
-                let src_path = format!("{link_path}.src");
-                let src = node_id(field(link_fields, "src", &link_path)?, &src_path)?;
-                if src != id {
-                    return Err(JsonError::LinkSourceMismatch { path: src_path, src, symbol: id });
-                }
-                let dst = node_id(field(link_fields, "dst", &link_path)?, &format!("{link_path}.dst"))?;
-                let label = string_field(link_fields, "label", &link_path)?;
-                let link_attrs = attributes(
-                    field(link_fields, "linkAttribute", &link_path)?,
-                    &format!("{link_path}.linkAttribute"),
-                )?;
-                let key = EdgeKey::new(src, dst, label);
+                let (key, link_attrs) = self.link(link, id, &format!("{links_path}[{index}]"))?;
                 if graph.edges.contains_key(&key) {
-                    return Err(JsonError::DuplicateLink { path: link_path, key });
+                    return Err(JsonError::DuplicateLink { path: format!("{links_path}[{index}]"), key });
                 }
                 graph.edges.insert(key, link_attrs);
             }
@@ -349,9 +415,30 @@ impl CortexGraph {
         }
         Ok(graph)
     }
+
+    /// A link listed under `symbol`. Leniently, a link whose `src` is another symbol is that symbol's link, as the
+    /// C++ loader reads it.
+    fn link(&mut self, link: &Json, symbol: NodeId, path: &str) -> Result<(EdgeKey, Attributes), JsonError> {
+        let fields = self.object(link, path)?;
+        let src_path = format!("{path}.src");
+        let src = node_id(field(fields, "src", path)?, &src_path)?;
+        if src != symbol && !self.lenient() {
+            return Err(JsonError::LinkSourceMismatch { path: src_path, src, symbol });
+        }
+        if src != symbol {
+            self.warn(
+                src_path,
+                format!("the link is listed under symbol {symbol} but starts at {src}; read as {src}'s"),
+            );
+        }
+        let dst = node_id(field(fields, "dst", path)?, &format!("{path}.dst"))?;
+        let label = string_field(fields, "label", path)?;
+        let attrs = self.attributes(field(fields, "linkAttribute", path)?, &format!("{path}.linkAttribute"))?;
+        Ok((EdgeKey::new(src, dst, label), attrs))
+    }
 }
 
-/// Reads CORTEX JSON text.
+/// Reads CORTEX JSON text strictly: the exact picture of a file that needs no warning.
 ///
 /// # Errors
 /// [`JsonError`] naming the line and column of a syntax error, or the path of anything that does not follow the
@@ -360,11 +447,19 @@ pub fn parse(text: &str) -> Result<CortexGraph, JsonError> {
     parse_bytes(text.as_bytes())
 }
 
-/// Reads CORTEX JSON from bytes (e.g. a file's contents); a leading UTF-8 byte order mark is skipped.
+/// Reads CORTEX JSON from bytes strictly (e.g. a file's contents); a leading UTF-8 byte order mark is skipped.
 ///
 /// # Errors
 /// As [`parse`]; bytes that are not UTF-8 are a syntax error at their position.
 pub fn parse_bytes(bytes: &[u8]) -> Result<CortexGraph, JsonError> {
+    read(bytes, Strictness::Strict).map(|reading| reading.graph)
+}
+
+/// Reads CORTEX JSON from bytes, leniently or strictly (see the module documentation for what each accepts).
+///
+/// # Errors
+/// As [`parse`], for what `strictness` does not accept.
+pub fn read(bytes: &[u8], strictness: Strictness) -> Result<Reading, JsonError> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let tree: Json = serde_json::from_slice(bytes).map_err(|error| {
         let (line, column) = (error.line(), error.column());
@@ -373,5 +468,7 @@ pub fn parse_bytes(bytes: &[u8]) -> Result<CortexGraph, JsonError> {
         let what = full.strip_suffix(&suffix).unwrap_or(&full).to_owned();
         JsonError::Syntax { line, column, what }
     })?;
-    CortexGraph::from_tree(&tree)
+    let mut reader = Reader { strictness, warnings: Vec::new() };
+    let graph = reader.graph(&tree)?;
+    Ok(Reading { graph, warnings: reader.warnings })
 }
