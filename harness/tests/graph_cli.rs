@@ -109,7 +109,8 @@ fn convert_round_trips_a_real_graph_and_refuses_a_bad_one() {
     let bad = fixture("dangling_dst.json");
     let target = scratch.join("never_written.json");
     let _ = std::fs::remove_file(&target);
-    let output = cortex(&["graph".as_ref(), "convert".as_ref(), bad.as_os_str(), target.as_os_str()]);
+    let output =
+        cortex(&["graph".as_ref(), "convert".as_ref(), "--strict".as_ref(), bad.as_os_str(), target.as_os_str()]);
     assert_eq!(output.status.code(), Some(1));
     let stderr = text(&output.stderr);
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
@@ -117,23 +118,42 @@ fn convert_round_trips_a_real_graph_and_refuses_a_bad_one() {
     assert!(!target.exists(), "a refused conversion wrote its output");
 }
 
+/// Unknown names are accepted by default, with a warning naming the place, and `info` lists them; `--strict`
+/// refuses them.
 #[test]
-fn convert_accepts_unknown_names_only_when_asked() {
+fn convert_accepts_unknown_names_unless_strict() {
     let scratch = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
     let input = fixture("unknown_attribute.json");
     let target = scratch.join("unknown_attribute_out.json");
-    let strict = cortex(&["graph".as_ref(), "convert".as_ref(), input.as_os_str(), target.as_os_str()]);
+    let _ = std::fs::remove_file(&target);
+    let strict =
+        cortex(&["graph".as_ref(), "convert".as_ref(), "--strict".as_ref(), input.as_os_str(), target.as_os_str()]);
     assert_eq!(strict.status.code(), Some(1));
     assert!(text(&strict.stderr).contains("unknown attribute name \"favourite_colour\""));
-    let permissive = cortex(&[
-        "graph".as_ref(),
-        "convert".as_ref(),
-        input.as_os_str(),
-        target.as_os_str(),
-        "--allow-unknown-names".as_ref(),
-    ]);
-    assert!(permissive.status.success(), "stderr: {}", text(&permissive.stderr));
+    assert!(!target.exists(), "a refused conversion wrote its output");
+    let lenient = cortex(&["graph".as_ref(), "convert".as_ref(), input.as_os_str(), target.as_os_str()]);
+    assert!(lenient.status.success(), "stderr: {}", text(&lenient.stderr));
+    let warning = "warning: ";
+    let stderr = text(&lenient.stderr);
+    assert!(stderr.starts_with(warning) && stderr.contains("attribute[\"favourite_colour\"]: unknown"), "{stderr}");
     assert!(text(&std::fs::read(&target).unwrap()).contains("\"favourite_colour\""));
+    let info = cortex(&["graph".as_ref(), "info".as_ref(), input.as_os_str()]);
+    assert!(
+        text(&info.stdout)
+            .lines()
+            .any(|line| line.starts_with("unknown attributes") && line.ends_with("favourite_colour"))
+    );
+}
+
+/// A real graph whose `parent` is a u32 (type code 6, an older CORTEX) keeps it, and `info` says so.
+#[test]
+fn info_lists_names_stored_with_another_type_than_the_dictionarys() {
+    let input = workspace().join("datasets/cortex-graphs/furniture.json");
+    let output = cortex(&["graph".as_ref(), "info".as_ref(), "--json".as_ref(), input.as_os_str()]);
+    assert!(output.status.success(), "stderr: {}", text(&output.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let other_types = &report["outside_dictionary"]["other_types"];
+    assert_eq!(other_types, &serde_json::json!(["parent: u32 (dictionary: u64)"]), "{report}");
 }
 
 #[test]

@@ -187,7 +187,12 @@ pub fn start_rtps_agent(
     config.life_file = life_file;
     if let Some(path) = seed_json {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        config.seed = Some(dsr::json::parse_bytes(&bytes).with_context(|| format!("parsing {}", path.display()))?);
+        let reading = dsr::json::read(&bytes, dsr::json::Strictness::Lenient)
+            .with_context(|| format!("parsing {}", path.display()))?;
+        for warning in &reading.warnings {
+            eprintln!("warning: {}: {warning}", path.display());
+        }
+        config.seed = Some(reading.graph);
     }
     start_rtps_agent_with(config, rtps, faults)
 }

@@ -1,8 +1,10 @@
 //! `cortex graph`: look inside CORTEX JSON graphs and convert them through a replica.
 //!
-//! `info` reads a file without importing it, so it can report what an import would refuse (dangling links) and
-//! what would confuse kinematics (RT cycles, several RT parents). `convert` loads the file into a replica and
-//! writes the replica back, which normalises a file to this project's canonical output and proves it imports.
+//! `info` reads a file without importing it, so it can report what an import would skip (dangling links), the
+//! names outside the built-in dictionary, and what would confuse kinematics (RT cycles, several RT parents).
+//! `convert` loads the file into a replica and writes the replica back, which normalises a file to this project's
+//! canonical output and proves it imports. Both read leniently by default (as the C++ loader does, with a warning
+//! for everything converted, skipped or learnt; `dsr::json` states the rules); `--strict` refuses all of that.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -10,8 +12,8 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use anyhow::Context as _;
 use clap::{Args, Subcommand};
-use dsr::json::{self, CortexGraph, GraphAnalysis};
-use dsr::{Dictionary, NodeId, Replica, ReplicaId};
+use dsr::json::{self, CortexGraph, GraphAnalysis, JsonWarning, Strictness};
+use dsr::{NodeId, Replica, ReplicaId};
 use serde::Serialize;
 
 /// Arguments of `cortex graph`.
@@ -32,6 +34,9 @@ enum GraphCommand {
         /// Print stable, machine-readable JSON instead of tables.
         #[arg(long)]
         json: bool,
+        /// Refuse what the lenient rules accept with a warning.
+        #[arg(long)]
+        strict: bool,
     },
     /// Load a CORTEX JSON file into a replica and write the replica back as CORTEX JSON.
     Convert {
@@ -39,9 +44,10 @@ enum GraphCommand {
         input: PathBuf,
         /// The file to write (replaced if it exists).
         output: PathBuf,
-        /// Accept attribute names, node types and edge types the built-in dictionary does not know.
+        /// Refuse what the lenient rules accept with a warning: unknown names, another type than the dictionary's,
+        /// fractions under integer type codes, links with a missing end or listed under another symbol.
         #[arg(long)]
-        allow_unknown_names: bool,
+        strict: bool,
     },
 }
 
@@ -51,20 +57,20 @@ enum GraphCommand {
 /// A file that cannot be read, written or understood, with the file name and the place in it.
 pub fn run(args: GraphArgs) -> anyhow::Result<()> {
     match args.command {
-        GraphCommand::Info { file, json } => {
-            let graph = read_graph(&file)?;
+        GraphCommand::Info { file, json, strict } => {
+            let graph = read_graph(&file, strictness(strict))?;
             let analysis = graph.analyze();
             let text = if json { info_json(&file, &analysis)? } else { info_text(&file, &analysis) };
             print!("{text}");
             Ok(())
         }
-        GraphCommand::Convert { input, output, allow_unknown_names } => {
-            let graph = read_graph(&input)?;
-            let dictionary = if allow_unknown_names { Dictionary::permissive() } else { Dictionary::builtin() };
-            let mut replica = Replica::with_dictionary(ReplicaId(1), dictionary);
+        GraphCommand::Convert { input, output, strict } => {
+            let graph = read_graph(&input, strictness(strict))?;
+            let mut replica = Replica::new(ReplicaId(1));
             let report = graph
-                .import_into(&mut replica, now_ns())
+                .import_with(&mut replica, now_ns(), strictness(strict))
                 .with_context(|| format!("cannot import {}", input.display()))?;
+            warn(&input, &report.warnings);
             let text = json::export(&replica).with_context(|| format!("cannot export {}", input.display()))?;
             std::fs::write(&output, text).with_context(|| format!("cannot write {}", output.display()))?;
             println!(
@@ -79,9 +85,22 @@ pub fn run(args: GraphArgs) -> anyhow::Result<()> {
     }
 }
 
-fn read_graph(path: &Path) -> anyhow::Result<CortexGraph> {
+fn strictness(strict: bool) -> Strictness {
+    if strict { Strictness::Strict } else { Strictness::Lenient }
+}
+
+/// Reads a file, printing the read's warnings on standard error.
+fn read_graph(path: &Path, strictness: Strictness) -> anyhow::Result<CortexGraph> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    json::parse_bytes(&bytes).with_context(|| format!("cannot load {}", path.display()))
+    let reading = json::read(&bytes, strictness).with_context(|| format!("cannot load {}", path.display()))?;
+    warn(path, &reading.warnings);
+    Ok(reading.graph)
+}
+
+fn warn(path: &Path, warnings: &[JsonWarning]) {
+    for warning in warnings {
+        eprintln!("warning: {}: {warning}", path.display());
+    }
 }
 
 /// Wall-clock time in ns for the import's operations (they only order the replica's own writes).
@@ -133,6 +152,10 @@ fn info_text(file: &Path, analysis: &GraphAnalysis) -> String {
             "several RT parents",
             none_or(&analysis.several_rt_parents, |node| format!("{} has {}", node.node, ids(&node.parents))),
         ),
+        ("unknown node types", none_or(&analysis.outside_dictionary.node_types, String::clone)),
+        ("unknown edge types", none_or(&analysis.outside_dictionary.edge_labels, String::clone)),
+        ("unknown attributes", none_or(&analysis.outside_dictionary.attributes, String::clone)),
+        ("retyped attributes", none_or(&analysis.outside_dictionary.other_types, String::clone)),
     ];
     let width = summary.iter().map(|(label, _)| label.len()).max().unwrap_or(0);
     for (label, value) in summary {

@@ -702,6 +702,7 @@ impl<T: Transport> Inner<T> {
                 Event::SeedRefused { error } => {
                     tracing::error!("{me}: the seed graph was refused, starting empty: {error}")
                 }
+                Event::SeedWarning { warning } => tracing::warn!("{me}: seed graph: {warning}"),
                 Event::SeedUnused => tracing::warn!("{me}: joined a running graph; the seed graph is not used"),
                 Event::Answered { .. } => {}
                 Event::Collision { detail } => {

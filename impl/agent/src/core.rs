@@ -128,6 +128,12 @@ pub enum Event {
         /// Why.
         error: String,
     },
+    /// The seed graph was imported with a warning (a name it taught the graph's dictionary, an attribute kept
+    /// under another type than the dictionary's, a link skipped: see `dsr::json`).
+    SeedWarning {
+        /// The warning, with its place in the file.
+        warning: String,
+    },
     /// A running graph was joined, so the seed graph is not used.
     SeedUnused,
     /// A graph request was answered with a snapshot.
@@ -870,7 +876,11 @@ impl AgentCore {
             }
         } else if let Some(seed) = self.seed.0.take() {
             match seed.import_into(&mut replica, now_ns) {
-                Ok(report) => seed_nodes = Some(report.nodes),
+                Ok(report) => {
+                    seed_nodes = Some(report.nodes);
+                    let warnings = report.warnings.iter().map(|w| Event::SeedWarning { warning: w.to_string() });
+                    out.events.extend(warnings);
+                }
                 Err(error) => out.events.push(Event::SeedRefused { error: error.to_string() }),
             }
         }

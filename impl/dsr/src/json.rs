@@ -2,7 +2,7 @@
 //!
 //! CORTEX keeps its initial worlds in a JSON file
 //! (`{"DSRModel":{"symbols":{"<id>":{"id","type","name","attribute":{..},"links":[..]}}}}`), and agents load and
-//! save them. This module reads such a file into a [`CortexGraph`], an exact, typed picture of the file; imports
+//! save them. This module reads such a file ([`read`]) into a [`CortexGraph`], a typed picture of the file; imports
 //! that picture into a [`Replica`] all at once (validating everything first, so a refused import changes nothing);
 //! and writes a replica, or a `CortexGraph`, back in the same format. The CLI (`cortex graph info`) also uses the
 //! analysis helpers of [`CortexGraph`] ([`CortexGraph::analyze`]).
@@ -15,13 +15,42 @@
 //!   they are written as decimal strings, which no JSON reader rounds (ids reach 3.6e16, beyond 2^53).
 //! - f32 values are read as f64 and converted with `as f32`, which is what CORTEX's writer round-trips; they are
 //!   written with the shortest text that reads back to the same f32 bits. Integers (codes 1, 5, 6) must be JSON
-//!   integers in range; floats may be written as integers (`0`).
+//!   integers in range (but see the lenient rules); floats may be written as integers (`0`).
 //! - A UTF-8 byte order mark at the very start is accepted and skipped (editors on some systems add one; it
 //!   carries no meaning). Anything after the document is an error.
 //! - Each link is listed under its `src` symbol; a symbol's key must be its id.
 //! - Output is indented by four spaces like CORTEX's files, symbols in id order, keys and attributes in name
 //!   order, links in (dst, label) order, so the same graph always gives the same bytes. NaN and infinities have
 //!   no JSON form and make the export fail.
+//!
+//! # Lenient and strict
+//!
+//! Files of every CORTEX era are in use, and the C++ loader accepts more than the format above: the type code
+//! written in the file decides how a value is read, whatever the name's registered type. Reading and importing
+//! are therefore lenient by default ([`Strictness::Lenient`]) and accept, each with a [`JsonWarning`] that names
+//! the place:
+//!
+//! - **the file's type code wins**: an attribute whose name the dictionary declares with another type (`parent`
+//!   as u32 or i32 in older files, u64 today) is stored with the file's type, and the graph's dictionary accepts
+//!   that type under that name from then on ([`crate::Dictionary::learned_types`]); the export writes it back
+//!   with the same code and value;
+//! - **names the dictionary does not know** (a user's own node types, edge types and attributes) join the graph's
+//!   dictionary, so local calls may use them; a name that neither the built-in dictionary nor the graph knows is
+//!   still refused by local calls;
+//! - **a number with a fraction under an integer code** (1 i32, 5 bytes, 6 u32; e.g. `"height": {"type": 1,
+//!   "value": 5010.7}`) is rounded to the nearest integer, halves away from zero (the C++ loader converts it
+//!   through Qt's `QVariant::toInt`, which rounds too); out of range it is refused;
+//! - **a key repeated with the same value** is read once; repeated with another value it is refused, since which
+//!   one a reader keeps is not defined;
+//! - **a link listed under a symbol other than its `src`** is read as its `src`'s link, as the C++ loader does;
+//! - **a link whose end is neither a symbol of the file nor a node of the replica** is skipped on import (the
+//!   replica never holds a dangling edge; the C++ loader skips it too).
+//!
+//! The conversions happen once: what is written back reads again without a conversion warning. Refused in both
+//! modes, with the place named: syntax errors (the C++ loader silently loads an empty graph from them), the older
+//! AGM format (`symbols` as an array), missing fields, node id 0, duplicate ids, names taken twice, values that do
+//! not fit their type code after the rules above. [`Strictness::Strict`] refuses everything the lenient rules
+//! accept; [`parse`] and [`parse_bytes`] read strictly.
 //!
 //! Every error names the place in the document, as a path like
 //! `DSRModel.symbols["12"].attribute["pos_x"].value`, or gives the line and column of a syntax error.
@@ -49,6 +78,15 @@
 //! let written = json::export(&replica).unwrap();
 //! assert_eq!(json::parse(&written).unwrap(), graph);
 //! assert!(written.contains(r#""value": "1""#)); // u64 as a decimal string
+//!
+//! // A file of an older era: `parent` as a u32, a height with a fraction under the i32 code, a user's type.
+//! let old = r#"{"DSRModel": {"symbols": {"5": {"id": 5, "type": "room", "name": "hall", "links": [],
+//!     "attribute": {"parent": {"type": 6, "value": 1}, "height": {"type": 1, "value": 2500.4}}}}}}"#;
+//! assert!(json::read(old.as_bytes(), json::Strictness::Strict).is_err());
+//! let reading = json::read(old.as_bytes(), json::Strictness::Lenient).unwrap();
+//! let report = reading.graph.import_into(&mut replica, 2_000).unwrap();
+//! assert_eq!(reading.warnings.len() + report.warnings.len(), 3); // rounded; kept as u32; "room" learnt
+//! assert_eq!(replica.node_by_name("hall").unwrap().attr("parent"), Some(&dsr::Value::U32(1)));
 //!
 //! let error = json::parse(r#"{"DSRModel": {"symbols": {"5": {"id": 6}}}}"#).unwrap_err();
 //! assert_eq!(error.to_string(), r#"DSRModel.symbols["5"]: symbol key "5" differs from its id 6"#);
@@ -323,7 +361,7 @@ mod export;
 mod import;
 mod read;
 
-pub use analysis::{AttributeCount, DanglingLink, GraphAnalysis, SeveralParents, TypeCount};
+pub use analysis::{AttributeCount, DanglingLink, GraphAnalysis, OutsideDictionary, SeveralParents, TypeCount};
 pub use export::export;
 pub use import::ImportReport;
 pub use read::{parse, parse_bytes, read};

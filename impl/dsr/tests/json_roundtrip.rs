@@ -19,6 +19,23 @@ const REAL_GRAPHS: [(&str, usize, usize); 5] = [
     ("shadow_scene.json", 2, 1),
 ];
 
+/// Real graphs from other robocomp repositories (datasets/cortex-graphs/README.md), each of a different shape:
+/// file, nodes and edges imported, warnings of the lenient read and import.
+const WILD_GRAPHS: [(&str, usize, usize, usize); 12] = [
+    ("autonomyLab_objects.simscene.json", 41, 43, 11),
+    ("sala_beta.json", 17, 16, 2),
+    ("autonomyLab2.json", 31, 30, 4),
+    ("furniture.json", 30, 28, 1),
+    ("initial_dsr2_etc.json", 4, 3, 15),
+    ("Robot_giraff.json", 10, 9, 1),
+    ("conversationalAgent.json", 19, 20, 16),
+    ("autonomyLab_Residencia_giraff.json", 199, 198, 3),
+    ("shadow_beta.json", 19, 18, 8),
+    ("floor_dnn_world.json", 12, 11, 10),
+    ("active_inference_shadow.json", 8, 7, 10),
+    ("shadow_test_guide.json", 23, 23, 30),
+];
+
 fn dataset(name: &str) -> Vec<u8> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../datasets/cortex-graphs").join(name);
     std::fs::read(&path).unwrap_or_else(|error| panic!("cannot read {}: {error}", path.display()))
@@ -228,6 +245,26 @@ fn lenient_loading_accepts_what_the_cpp_loader_does_and_says_so() {
         assert_eq!(again.digest(), replica.digest(), "{name}: the round trip changed the graph");
         let conversions: Vec<&JsonWarning> = warnings.iter().filter(|w| !w.what.contains("dictionary")).collect();
         assert!(conversions.is_empty(), "{name}: written back, it still needs conversions: {conversions:?}");
+    }
+}
+
+/// Every real graph of the wild loads leniently with the warnings counted, and round-trips: what is written back
+/// is what was read (same type codes and values), less the links a missing end made the import skip.
+#[test]
+fn real_graphs_of_every_era_load_leniently_and_round_trip() {
+    for (name, nodes, edges, warning_count) in WILD_GRAPHS {
+        let reading = json::read(&dataset(name), Strictness::Lenient).unwrap_or_else(|error| panic!("{name}: {error}"));
+        let mut replica = Replica::new(ReplicaId(1));
+        let report = reading.graph.import_into(&mut replica, 1_000).unwrap_or_else(|error| panic!("{name}: {error}"));
+        assert_eq!((replica.node_count(), replica.edge_count()), (nodes, edges), "{name}: counts");
+        assert_eq!(reading.warnings.len() + report.warnings.len(), warning_count, "{name}: warnings");
+
+        let mut expected = reading.graph.clone();
+        expected.edges.retain(|key, _| expected.nodes.contains_key(&key.from) && expected.nodes.contains_key(&key.to));
+        let written = json::export(&replica).unwrap();
+        let again = json::read(written.as_bytes(), Strictness::Lenient).unwrap();
+        assert!(again.warnings.is_empty(), "{name}: written back, it needs conversions: {:?}", again.warnings);
+        assert_eq!(again.graph, expected, "{name}: the round trip changed the graph");
     }
 }
 

@@ -1,4 +1,5 @@
-//! The analysis behind `cortex graph info`: counts, RT depth, dangling links, several parents, RT cycles.
+//! The analysis behind `cortex graph info`: counts, RT depth, dangling links, several parents, RT cycles, and
+//! the names outside the built-in dictionary.
 
 use super::*;
 
@@ -33,6 +34,22 @@ pub struct GraphAnalysis {
     pub rt_cycles: Vec<Vec<NodeId>>,
     /// Symbols with more than one RT parent.
     pub several_rt_parents: Vec<SeveralParents>,
+    /// Names the built-in dictionary does not know, or knows with another type: a lenient import teaches them
+    /// to the graph's dictionary, a strict one refuses them.
+    pub outside_dictionary: OutsideDictionary,
+}
+
+/// The names of a graph that the built-in dictionary does not know, or knows with another type.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct OutsideDictionary {
+    /// Unknown node types.
+    pub node_types: Vec<String>,
+    /// Unknown edge labels.
+    pub edge_labels: Vec<String>,
+    /// Unknown attribute names.
+    pub attributes: Vec<String>,
+    /// Attribute names stored with a type other than the built-in one: `name: file type (dictionary type)`.
+    pub other_types: Vec<String>,
 }
 
 /// How many attributes have one value type.
@@ -103,6 +120,33 @@ fn type_as_text<S: Serializer>(value_type: &ValueType, serializer: S) -> Result<
     serializer.serialize_str(value_type.name())
 }
 
+/// The names among these counts that the built-in dictionary does not know, or knows with another type.
+fn outside_dictionary(
+    node_types: &BTreeMap<String, usize>,
+    edge_labels: &BTreeMap<String, usize>,
+    by_name: &BTreeMap<(String, ValueType), (usize, usize)>,
+) -> OutsideDictionary {
+    let builtin = Dictionary::builtin();
+    let unknown = |names: &BTreeMap<String, usize>, known: &dyn Fn(&str) -> bool| -> Vec<String> {
+        names.keys().filter(|name| !known(name)).cloned().collect()
+    };
+    let mut outside = OutsideDictionary {
+        node_types: unknown(node_types, &|name| builtin.known_node_type(name).is_some()),
+        edge_labels: unknown(edge_labels, &|name| builtin.known_edge_type(name).is_some()),
+        ..OutsideDictionary::default()
+    };
+    for (name, value_type) in by_name.keys() {
+        match builtin.attr_type(name) {
+            None if outside.attributes.last() != Some(name) => outside.attributes.push(name.clone()),
+            Some(declared) if declared != *value_type => {
+                outside.other_types.push(format!("{name}: {value_type} (dictionary: {declared})"));
+            }
+            _ => {}
+        }
+    }
+    outside
+}
+
 impl CortexGraph {
     /// RT links between two symbols of the graph, as parent → children lists (children in id order).
     fn rt_children(&self) -> BTreeMap<NodeId, Vec<NodeId>> {
@@ -158,6 +202,7 @@ impl CortexGraph {
             }
         }
         let rt_roots = children.keys().filter(|id| !parents.contains_key(id)).copied().collect();
+        let outside_dictionary = outside_dictionary(&node_types, &edge_labels, &by_name);
         GraphAnalysis {
             nodes: self.nodes.len(),
             edges: self.edges.len(),
@@ -186,6 +231,7 @@ impl CortexGraph {
                 .filter(|(_, parents)| parents.len() > 1)
                 .map(|(node, parents)| SeveralParents { node, parents })
                 .collect(),
+            outside_dictionary,
         }
     }
 
