@@ -102,8 +102,10 @@
 //! leaves the replica unchanged. Nothing that comes from outside panics.
 //!
 //! **Types.** The [`Dictionary`] types every attribute name; [`attrs`] has typed keys for the built-in ones, so a
-//! value of the wrong type does not compile. Replicas that exchange deltas must agree on their dictionaries: a delta
-//! that gives a known name another type is refused whole.
+//! value of the wrong type does not compile. Local operations are checked against the dictionary; remote deltas
+//! are not refused for their names or types (only for names that cannot be held): a replica learns every name and
+//! attribute type a delta brings, so that what it accepts never depends on the order things arrived in, and real
+//! graphs whose files store a name with another type than today's (see [`json`]) travel between agents.
 
 pub mod causal;
 pub mod delta;
