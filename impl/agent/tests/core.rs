@@ -114,3 +114,51 @@ fn a_peer_missing_many_overwritten_frames_gets_a_snapshot_and_one_missing_a_few_
         answer.iter().map(Message::kind).collect::<Vec<_>>()
     );
 }
+
+/// Hands every message of `sends` to `to`; returns what `to` sends in reply.
+fn exchange(sends: &[agent::core::Send], to: &mut AgentCore, now_ns: u64) -> Output {
+    let mut replies = Output::default();
+    for send in sends {
+        let message = Message::decode(&send.message.encode()).unwrap();
+        if let Some(input) = Input::decode(message).input {
+            let out = to.handle(now_ns, input);
+            replies.sends.extend(out.sends);
+            replies.events.extend(out.events);
+        }
+    }
+    replies
+}
+
+/// A real graph of an older era (a user's node types and attribute names, `battery_load` as f32 where the built-in
+/// dictionary says i32) seeds one agent with warnings, reaches a joiner with the built-in dictionary whole (the
+/// network is not refused for names), and the joiner may then write the names it learnt.
+#[test]
+fn a_graph_of_another_era_reaches_a_joiner_whose_dictionary_learns_its_names() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cortex-graphs/shadow_beta.json");
+    let reading = dsr::json::read(&std::fs::read(path).unwrap(), dsr::json::Strictness::Lenient).unwrap();
+    let config = AgentConfig { join_wait: Duration::ZERO, ..AgentConfig::new(AgentId(3)) };
+    let mut seeded =
+        AgentCore::new(config.protocol(), LifeSeed { nonce: 5, recorded_incarnation: None }, Some(reading.graph), 0);
+    let out = seeded.tick(0);
+    let warnings = out.events.iter().filter(|event| matches!(event, Event::SeedWarning { .. })).count();
+    assert_eq!(warnings, 8, "{:?}", out.events);
+
+    let config = AgentConfig { join_wait: Duration::from_secs(5), ..AgentConfig::new(AgentId(4)) };
+    let mut joiner = AgentCore::new(config.protocol(), LifeSeed { nonce: 6, recorded_incarnation: None }, None, 0);
+    let request = joiner.tick(1);
+    let answer = exchange(&request.sends, &mut seeded, 2);
+    let joined = exchange(&answer.sends, &mut joiner, 3);
+    assert!(joiner.is_ready(), "{:?}", joined.events);
+    assert!(!joined.events.iter().any(|event| matches!(event, Event::Rejected { .. })), "{:?}", joined.events);
+    let (mine, theirs) = (joiner.replica().unwrap(), seeded.replica().unwrap());
+    assert_eq!(mine.digest(), theirs.digest());
+    assert_eq!(mine.dictionary().learned_types("battery_load"), [dsr::ValueType::F32]);
+
+    let battery = mine.nodes().find(|node| node.attr("battery_load").is_some()).unwrap().id();
+    joiner
+        .write(4, |r, now| {
+            let delta = r.set_attrs(now, battery, [("battery_load", dsr::Value::F32(0.5))])?;
+            r.set_attrs(now, battery, [("servo_pos", dsr::Value::F32(1.0))]).map(|other| ((), vec![delta, other]))
+        })
+        .unwrap();
+}
