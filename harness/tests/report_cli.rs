@@ -81,6 +81,9 @@ fn tiny_report_has_every_figure_and_section() {
     let output = cortex(&["report", "--config", config_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert!(String::from_utf8_lossy(&output.stdout).contains("report tiny (quick)"));
+    // Not on a terminal, progress is one line per finished run.
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.lines().any(|line| line.starts_with("run 1/") && line.contains(" left")), "{stderr}");
 
     for stem in measure::report::FIGURES.into_iter().chain([measure::timeline::FIGURE]) {
         let svg = std::fs::read_to_string(out.join(format!("{stem}.svg"))).unwrap();

@@ -14,6 +14,8 @@ use anyhow::Context as _;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use measure::experiment::{ExperimentFile, run_set};
+use std::io::IsTerminal as _;
+use std::time::Instant;
 
 /// Arguments of `cortex report`.
 #[derive(Debug, Args)]
@@ -36,6 +38,58 @@ pub struct ReportArgs {
     /// a note; the report says which it was.
     #[arg(long, value_enum, default_value_t = super::bench::NetnsMode::Auto)]
     netns: super::bench::NetnsMode,
+}
+
+/// Progress of a long report: a bar on a terminal; elsewhere (a log file, CI) one line per finished run on
+/// standard error, so a log shows what ran, how long it took and what is left.
+enum Progress {
+    Bar(ProgressBar),
+    Lines { total: u64, done: u64, started: Instant, last: Instant },
+}
+
+impl Progress {
+    fn new(total: u64, title: &str) -> anyhow::Result<Progress> {
+        if !std::io::stderr().is_terminal() {
+            let now = Instant::now();
+            eprintln!("{title}: {total} runs");
+            return Ok(Progress::Lines { total, done: 0, started: now, last: now });
+        }
+        let bar = ProgressBar::new(total);
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs  {msg}")
+                .context("progress bar template")?
+                .progress_chars("=> "),
+        );
+        bar.set_message(title.to_owned());
+        Ok(Progress::Bar(bar))
+    }
+
+    /// The run `label` finished.
+    fn step(&mut self, label: &str) {
+        match self {
+            Progress::Bar(bar) => {
+                bar.inc(1);
+                bar.set_message(label.to_owned());
+            }
+            Progress::Lines { total, done, started, last } => {
+                *done += 1;
+                let now = Instant::now();
+                eprintln!(
+                    "run {done}/{total} ({label}) took {:.1} s; {:.0} s in all, {} left",
+                    (now - *last).as_secs_f64(),
+                    (now - *started).as_secs_f64(),
+                    *total - (*done).min(*total),
+                );
+                *last = now;
+            }
+        }
+    }
+
+    fn finish(self) {
+        if let Progress::Bar(bar) = self {
+            bar.finish_and_clear();
+        }
+    }
 }
 
 /// Runs `cortex report`.
@@ -62,20 +116,10 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
     let root = ExperimentFile::root_of(&args.config);
     let (mode, set) = if args.full { ("full", &file.full) } else { ("quick", &file.quick) };
     let out = args.out.unwrap_or_else(|| root.join("reports").join(format!("{}-{mode}", file.name)));
-    let bar = ProgressBar::new(set.steps());
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs  {msg}")
-            .context("progress bar template")?
-            .progress_chars("=> "),
-    );
-    bar.set_message(format!("{} ({mode})", file.name));
-    let mut progress = |label: &str| {
-        bar.inc(1);
-        bar.set_message(label.to_owned());
-    };
+    let mut progress = Progress::new(set.steps(), &format!("{} ({mode})", file.name))?;
     let program = std::env::current_exe().context("cannot find the cortex binary to start receiver processes")?;
-    let results = run_set(set, &root, &file.name, mode, Some(&program), &mut progress)?;
-    bar.finish_and_clear();
+    let results = run_set(set, &root, &file.name, mode, Some(&program), &mut |label| progress.step(label))?;
+    progress.finish();
     measure::report::write(&results, &out)?;
     println!(
         "report {} ({mode}): {} runs in {:.1} s, written to {}",
