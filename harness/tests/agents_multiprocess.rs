@@ -8,6 +8,8 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+use agent::StatusLine;
+
 fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
@@ -25,13 +27,7 @@ impl Drop for Proc {
     }
 }
 
-fn spawn(
-    id: u32,
-    prefix: &str,
-    dir: &std::path::Path,
-    extra: &[&str],
-    tx: mpsc::Sender<(u32, serde_json::Value)>,
-) -> Proc {
+fn spawn(id: u32, prefix: &str, dir: &std::path::Path, extra: &[&str], tx: mpsc::Sender<(u32, StatusLine)>) -> Proc {
     let dump = dir.join(format!("dump{id}.json"));
     let mut child = Command::new(env!("CARGO_BIN_EXE_cortex"))
         .args(["agent", "--id", &id.to_string(), "--domain", "0", "--topic-prefix", prefix, "--json-status"])
@@ -48,9 +44,11 @@ fn spawn(
     let stdout = child.stdout.take().unwrap();
     std::thread::spawn(move || {
         for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            if let Ok(value) = serde_json::from_str(&line)
-                && tx.send((id, value)).is_err()
-            {
+            if !line.starts_with('{') {
+                continue;
+            }
+            let status: StatusLine = serde_json::from_str(&line).unwrap_or_else(|e| panic!("{e}: {line}"));
+            if tx.send((id, status)).is_err() {
                 return;
             }
         }
@@ -64,7 +62,7 @@ fn three_agent_processes_converge_to_identical_dumps() {
     std::fs::create_dir_all(&dir).unwrap();
     let prefix = format!("mp{}", std::process::id());
     let seed = workspace().join("datasets/cortex-graphs/Robot_viriato.json");
-    let seed_nodes = dsr::json::parse(&std::fs::read_to_string(&seed).unwrap()).unwrap().nodes.len() as u64;
+    let seed_nodes = dsr::json::parse(&std::fs::read_to_string(&seed).unwrap()).unwrap().nodes.len();
     let (tx, rx) = mpsc::channel();
 
     let mut procs =
@@ -72,8 +70,8 @@ fn three_agent_processes_converge_to_identical_dumps() {
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
         let (_, status) = rx.recv_timeout(deadline.saturating_duration_since(Instant::now())).expect("agent 1 status");
-        if status["ready"] == true {
-            assert_eq!(status["nodes"].as_u64(), Some(seed_nodes));
+        if status.ready {
+            assert_eq!(status.nodes, seed_nodes);
             break;
         }
     }
@@ -87,17 +85,17 @@ fn three_agent_processes_converge_to_identical_dumps() {
     loop {
         let (id, status) =
             rx.recv_timeout(deadline.saturating_duration_since(Instant::now())).expect("converged in time");
-        assert_eq!(status["rejected"].as_u64(), Some(0), "{status}");
-        assert!(status["collision"].is_null(), "{status}");
+        assert_eq!(status.rejected, 0, "{status:?}");
+        assert!(status.collision.is_none(), "{status:?}");
         last.insert(id, status);
         let done = last.len() == 3
-            && last.values().all(|s| s["nodes"].as_u64() == Some(seed_nodes + 10) && !s["digest"].is_null())
-            && last.values().all(|s| s["digest"] == last[&1]["digest"]);
+            && last.values().all(|s: &StatusLine| s.nodes == seed_nodes + 10 && s.digest.is_some())
+            && last.values().all(|s| s.digest == last[&1].digest);
         if done {
             break;
         }
     }
-    let replicas: std::collections::BTreeSet<_> = last.values().map(|s| s["replica"].as_u64().unwrap()).collect();
+    let replicas: std::collections::BTreeSet<_> = last.values().map(|s| s.replica.unwrap()).collect();
     assert_eq!(replicas.len(), 3, "distinct replica ids");
 
     for proc in &mut procs {
@@ -112,7 +110,7 @@ fn three_agent_processes_converge_to_identical_dumps() {
     assert_eq!(dumps[0], dumps[1]);
     assert_eq!(dumps[0], dumps[2]);
     let graph = dsr::json::parse(&dumps[0]).unwrap();
-    assert_eq!(graph.nodes.len() as u64, seed_nodes + 10);
+    assert_eq!(graph.nodes.len(), seed_nodes + 10);
     for id in [2, 3] {
         for i in 0..5 {
             let name = format!("a{id}_{i}");

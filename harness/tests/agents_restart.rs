@@ -13,20 +13,20 @@ use std::time::Duration;
 use common::{Agent, converge, seed_nodes, signal, spawn, spawn_seeded};
 
 /// Waits until `agent` is ready with at least `nodes` nodes; returns its replica id.
-fn ready_replica(agent: &mut Agent, nodes: u64) -> u64 {
+fn ready_replica(agent: &mut Agent, nodes: usize) -> u32 {
     let status = agent.wait_for(
         &format!("ready with at least {nodes} nodes"),
         Duration::from_secs(30),
-        |s| s["ready"] == true && s["nodes"].as_u64().is_some_and(|n| n >= nodes),
+        |s| s.ready && s.nodes >= nodes,
         |_| false,
     );
-    status["replica"].as_u64().expect("a ready agent has a replica id")
+    status.replica.expect("a ready agent has a replica id")
 }
 
 /// Agent 2 writes 3 nodes into the seeded agent's graph and stops; the seeded agent is paused; `restarts` lives of
 /// agent 2 start alone one after the other (each killed before the next, the last one kept), each writing 5
 /// nodes; the seeded agent resumes and meets the last life. Returns the replica ids of agent 2's lives.
-fn restart_alone_while_the_peer_is_paused(domain: u16, restarts: u32) -> Vec<u64> {
+fn restart_alone_while_the_peer_is_paused(domain: u16, restarts: u32) -> Vec<u32> {
     let prefix = format!("restart{}d{domain}", std::process::id());
     let nodes = seed_nodes();
     let mut seeded = spawn_seeded(domain, &prefix);

@@ -12,11 +12,16 @@ use std::sync::Arc;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use agent::{Agent, AgentConfig, AgentId, CallError};
+use agent::{Agent, AgentConfig, AgentId, CallError, StatusLine};
 use bica::debug::DebugFrame;
 use bica::service::{COMPONENTS, ComponentsReply, DEBUG_FRAME};
 use transport::SystemClock;
 use transport::rtps::{RtpsConfig, RtpsTransport};
+
+/// Visible nodes of `node_type` in a status line.
+fn count(status: &StatusLine, node_type: &str) -> u64 {
+    status.node_types.as_ref().and_then(|types| types.get(node_type)).copied().unwrap_or(0)
+}
 
 /// A spawned agent whose status lines arrive on a channel; killed when dropped.
 struct Proc(Child);
@@ -28,7 +33,7 @@ impl Drop for Proc {
     }
 }
 
-fn spawn(id: u32, prefix: &str, extra: &[&str], tx: mpsc::Sender<(u32, serde_json::Value)>) -> Proc {
+fn spawn(id: u32, prefix: &str, extra: &[&str], tx: mpsc::Sender<(u32, StatusLine)>) -> Proc {
     let mut child = Command::new(env!("CARGO_BIN_EXE_cortex"))
         .args(["agent", "--id", &id.to_string(), "--domain", "0", "--topic-prefix", prefix, "--json-status"])
         // A graph of this test alone: no incarnation record left in the home directory.
@@ -43,9 +48,11 @@ fn spawn(id: u32, prefix: &str, extra: &[&str], tx: mpsc::Sender<(u32, serde_jso
     let stdout = child.stdout.take().unwrap();
     std::thread::spawn(move || {
         for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            if let Ok(value) = serde_json::from_str(&line)
-                && tx.send((id, value)).is_err()
-            {
+            if !line.starts_with('{') {
+                continue;
+            }
+            let status: StatusLine = serde_json::from_str(&line).unwrap_or_else(|e| panic!("{e}: {line}"));
+            if tx.send((id, status)).is_err() {
                 return;
             }
         }
@@ -66,11 +73,10 @@ fn a_camera_detector_process_writes_blob_nodes_into_the_camera_agents_graph() {
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
         let (id, status) = rx.recv_timeout(left).expect("no blob node reached agent 1 within 60 s");
-        seen_detector |= id == 2 && status["ready"] == true;
-        let blobs = status["node_types"]["blob"].as_u64().unwrap_or(0);
-        if id == 1 && blobs > 0 {
+        seen_detector |= id == 2 && status.ready;
+        if id == 1 && count(&status, "blob") > 0 {
             assert!(seen_detector, "blob nodes appeared before the detector was ready");
-            assert_eq!(status["node_types"]["camera"].as_u64(), Some(1));
+            assert_eq!(count(&status, "camera"), 1);
             break;
         }
     }
@@ -156,10 +162,10 @@ fn a_bridge_process_replays_a_log_into_another_agents_graph() {
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
         let (id, status) = rx.recv_timeout(left).expect("the bridged sensors never reached agent 2 within 60 s");
-        let count = |node_type: &str| status["node_types"][node_type].as_u64().unwrap_or(0);
+        let count = |node_type: &str| count(&status, node_type);
         if id == 2 && count("camera") >= 2 && count("imu") >= 1 && count("pose") >= 1 {
             // Camera images and camera info are two topics, hence two camera nodes; TF frames are transforms.
-            assert!(count("transform") >= 1, "TF frames arrive as transform nodes: {status}");
+            assert!(count("transform") >= 1, "TF frames arrive as transform nodes: {status:?}");
             break;
         }
     }

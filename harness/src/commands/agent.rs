@@ -336,33 +336,9 @@ pub fn run(args: AgentArgs) -> Result<()> {
     Ok(())
 }
 
-fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> serde_json::Value {
-    let status = agent.status();
-    serde_json::json!({
-        "id": status.id.0,
-        "ready": status.ready,
-        "replica": status.replica.map(|r| r.0),
-        "nodes": status.nodes,
-        "edges": status.edges,
-        "digest": agent.digest().map(|d| d.to_string()),
-        "peers": status.peers.iter().map(|p| p.0).collect::<Vec<_>>(),
-        "rejected": status.rejected,
-        "collision": status.collision,
-        "uptime_ms": started.elapsed().as_millis() as u64,
-        "samples_sent": status.transport.samples_sent,
-        "samples_received": status.transport.samples_received,
-        "calls_served": status.calls_served,
-        "node_types": agent.read(|r| {
-            let mut counts = std::collections::BTreeMap::<String, u64>::new();
-            for node in r.nodes() {
-                *counts.entry(node.node_type().to_string()).or_default() += 1;
-            }
-            counts
-        }),
-        "wire_bytes_sent": status.transport.wire_bytes_sent,
-        "participant_failures": status.transport.participant_failures,
-        "participant_rebuilds": status.transport.participant_rebuilds,
-    })
+fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> String {
+    let line = agent.status_line(started.elapsed().as_millis() as u64);
+    serde_json::to_string(&line).unwrap_or_else(|error| format!("{{\"error\": \"status line: {error}\"}}"))
 }
 
 /// What [`play_log`] played.

@@ -19,6 +19,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+use agent::StatusLine;
 use anyhow::{Context as _, Result, bail};
 
 use measure::roles::{AgentRow, ComponentRow};
@@ -116,7 +117,7 @@ fn spawn(
     prefix: &str,
     role: Option<&RoleSpec>,
     faults: Option<&str>,
-    tx: mpsc::Sender<(u32, serde_json::Value)>,
+    tx: mpsc::Sender<(u32, StatusLine)>,
 ) -> Result<AgentProcess> {
     let program = std::env::current_exe().context("cannot find the cortex binary")?;
     let mut command = Command::new(program);
@@ -151,8 +152,10 @@ fn spawn(
     let stdin = child.stdin.take();
     std::thread::spawn(move || {
         for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            if let Ok(value) = serde_json::from_str(&line)
-                && tx.send((id, value)).is_err()
+            // Lines that are not status lines (a role's own output) are skipped; a status line that does not parse
+            // is a mismatch between writer and reader, which the shared type rules out.
+            if let Ok(status) = serde_json::from_str::<StatusLine>(&line)
+                && tx.send((id, status)).is_err()
             {
                 return;
             }
@@ -167,14 +170,14 @@ fn role_name(role: Role) -> String {
     clap::ValueEnum::to_possible_value(&role).map(|v| v.get_name().to_owned()).unwrap_or_default()
 }
 
-fn report(id: u32, role: &str, status: &serde_json::Value) -> AgentRow {
+fn report(id: u32, role: &str, status: &StatusLine) -> AgentRow {
     AgentRow {
         id,
         role: role.to_owned(),
-        nodes: status["nodes"].as_u64().unwrap_or(0),
-        digest: status["digest"].as_str().unwrap_or("none").to_owned(),
-        samples_received: status["samples_received"].as_u64().unwrap_or(0),
-        samples_sent: status["samples_sent"].as_u64().unwrap_or(0),
+        nodes: status.nodes as u64,
+        digest: status.digest.clone().unwrap_or_else(|| "none".to_owned()),
+        samples_received: status.samples_received,
+        samples_sent: status.samples_sent,
         components: Vec::new(),
         components_error: None,
     }
@@ -248,11 +251,11 @@ pub fn replay(
         procs.push(spawn(id, config.domain, &prefix, role, faults.as_deref(), tx.clone())?);
     }
     drop(tx);
-    let mut last: BTreeMap<u32, serde_json::Value> = BTreeMap::new();
+    let mut last: BTreeMap<u32, StatusLine> = BTreeMap::new();
     let deadline = Instant::now() + config.settle;
-    while last.len() < procs.len() || !last.values().all(|s| s["ready"] == true) {
+    while last.len() < procs.len() || !last.values().all(|s| s.ready) {
         let Ok((id, status)) = rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) else {
-            let ready = last.values().filter(|s| s["ready"] == true).count();
+            let ready = last.values().filter(|s| s.ready).count();
             bail!("{ready} of {} agent processes were ready within {:?}", procs.len(), config.settle);
         };
         last.insert(id, status);
@@ -320,7 +323,7 @@ pub fn replay(
         let Ok((id, status)) = rx.recv_timeout(Duration::from_millis(50)) else { continue };
         last.insert(id, status);
         let Some(target) = bridge.digest().map(|d| d.to_string()) else { continue };
-        if last.len() == procs.len() && last.values().all(|s| s["digest"].as_str() == Some(target.as_str())) {
+        if last.len() == procs.len() && last.values().all(|s| s.digest.as_deref() == Some(target.as_str())) {
             converged_ms = Some(quiesced.elapsed().as_secs_f64() * 1e3);
             break;
         }

@@ -10,7 +10,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use serde_json::Value;
+use agent::StatusLine;
 
 pub fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -21,17 +21,17 @@ pub fn seed_path() -> PathBuf {
 }
 
 /// Nodes of the seed graph.
-pub fn seed_nodes() -> u64 {
-    dsr::json::parse(&std::fs::read_to_string(seed_path()).unwrap()).unwrap().nodes.len() as u64
+pub fn seed_nodes() -> usize {
+    dsr::json::parse(&std::fs::read_to_string(seed_path()).unwrap()).unwrap().nodes.len()
 }
 
 /// A spawned agent whose JSON status lines arrive on a channel; killed when dropped (also when a test fails).
 pub struct Agent {
     pub id: u32,
     pub child: Child,
-    status: mpsc::Receiver<Value>,
+    status: mpsc::Receiver<StatusLine>,
     /// The latest status line read.
-    last: Option<Value>,
+    last: Option<StatusLine>,
 }
 
 impl Drop for Agent {
@@ -64,9 +64,11 @@ pub fn spawn(id: u32, domain: u16, prefix: &str, extra: &[&str]) -> Agent {
     let (tx, status) = mpsc::channel();
     std::thread::spawn(move || {
         for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            if let Ok(value) = serde_json::from_str(&line)
-                && tx.send(value).is_err()
-            {
+            if !line.starts_with('{') {
+                continue;
+            }
+            let status: StatusLine = serde_json::from_str(&line).unwrap_or_else(|e| panic!("{e}: {line}"));
+            if tx.send(status).is_err() {
                 return;
             }
         }
@@ -94,10 +96,10 @@ pub fn pause(agent: &Agent, pause: Duration) {
 
 impl Agent {
     /// Reads every status line waiting; returns the latest one.
-    pub fn latest(&mut self) -> Option<&Value> {
+    pub fn latest(&mut self) -> Option<&StatusLine> {
         while let Ok(status) = self.status.try_recv() {
-            assert_eq!(status["rejected"].as_u64(), Some(0), "agent {}: {status}", self.id);
-            assert!(status["collision"].is_null(), "agent {}: {status}", self.id);
+            assert_eq!(status.rejected, 0, "agent {}: {status:?}", self.id);
+            assert!(status.collision.is_none(), "agent {}: {status:?}", self.id);
             self.last = Some(status);
         }
         self.last.as_ref()
@@ -109,9 +111,9 @@ impl Agent {
         &mut self,
         what: &str,
         within: Duration,
-        done: impl Fn(&Value) -> bool,
-        fail: impl Fn(&Value) -> bool,
-    ) -> Value {
+        done: impl Fn(&StatusLine) -> bool,
+        fail: impl Fn(&StatusLine) -> bool,
+    ) -> StatusLine {
         let deadline = Instant::now() + within;
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
@@ -119,8 +121,8 @@ impl Agent {
                 Ok(status) => status,
                 Err(_) => panic!("agent {}: {what} not within {within:?}; last status {:?}", self.id, self.last),
             };
-            assert_eq!(status["rejected"].as_u64(), Some(0), "agent {}: {status}", self.id);
-            assert!(!fail(&status), "agent {}: {what}: {status}", self.id);
+            assert_eq!(status.rejected, 0, "agent {}: {status:?}", self.id);
+            assert!(!fail(&status), "agent {}: {what}: {status:?}", self.id);
             self.last = Some(status.clone());
             if done(&status) {
                 return status;
@@ -129,43 +131,41 @@ impl Agent {
     }
 
     /// Waits until the agent is ready with `nodes` nodes.
-    pub fn wait_ready_with(&mut self, nodes: u64) -> Value {
+    pub fn wait_ready_with(&mut self, nodes: usize) -> StatusLine {
         self.wait_for(
             &format!("ready with {nodes} nodes"),
             Duration::from_secs(30),
-            |s| s["ready"] == true && s["nodes"].as_u64() == Some(nodes),
+            |s| s.ready && s.nodes == nodes,
             |_| false,
         )
     }
 
     /// The latest count of samples received.
     pub fn samples_received(&mut self) -> u64 {
-        self.latest().and_then(|s| s["samples_received"].as_u64()).unwrap_or(0)
+        self.latest().map_or(0, |s| s.samples_received)
     }
 }
 
 /// A joiner that must get the graph from the running agents: it waits long for an answer, and a joiner that
 /// is ready without the expected nodes (it started alone) fails the test at once.
-pub fn join(id: u32, domain: u16, prefix: &str, extra: &[&str], nodes: u64) -> Agent {
+pub fn join(id: u32, domain: u16, prefix: &str, extra: &[&str], nodes: usize) -> Agent {
     let mut joiner = spawn(id, domain, prefix, &[&["--join-wait-ms", "20000"], extra].concat());
     joiner.wait_for(
         &format!("joined with at least {nodes} nodes (not alone)"),
         Duration::from_secs(30),
-        |s| s["ready"] == true && s["nodes"].as_u64().is_some_and(|n| n >= nodes),
-        |s| s["ready"] == true && s["nodes"].as_u64().is_some_and(|n| n < nodes) && s["samples_received"] == 0,
+        |s| s.ready && s.nodes >= nodes,
+        |s| s.ready && s.nodes < nodes && s.samples_received == 0,
     );
     joiner
 }
 
 /// Waits until every agent reports `nodes` nodes and one digest.
-pub fn converge(agents: &mut [&mut Agent], nodes: u64) {
+pub fn converge(agents: &mut [&mut Agent], nodes: usize) {
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
-        let statuses: Vec<Option<Value>> = agents.iter_mut().map(|a| a.latest().cloned()).collect();
-        let done = statuses
-            .iter()
-            .all(|s| s.as_ref().is_some_and(|s| s["nodes"].as_u64() == Some(nodes) && !s["digest"].is_null()))
-            && statuses.windows(2).all(|w| w[0].as_ref().map(|s| &s["digest"]) == w[1].as_ref().map(|s| &s["digest"]));
+        let statuses: Vec<Option<StatusLine>> = agents.iter_mut().map(|a| a.latest().cloned()).collect();
+        let done = statuses.iter().all(|s| s.as_ref().is_some_and(|s| s.nodes == nodes && s.digest.is_some()))
+            && statuses.windows(2).all(|w| w[0].as_ref().map(|s| &s.digest) == w[1].as_ref().map(|s| &s.digest));
         if done {
             return;
         }

@@ -23,7 +23,7 @@ use dsr::{
 use transport::{Channel, Clock, Sample, Transport, TransportError};
 
 pub use crate::config::AgentConfig;
-pub use crate::status::{AgentStatus, AnswerTiming, JoinTimeline};
+pub use crate::status::{AgentStatus, AnswerTiming, JoinTimeline, StatusLine};
 
 use crate::AgentId;
 use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
@@ -361,6 +361,36 @@ impl<T: Transport + 'static> Agent<T> {
             transport: self.inner.transport.stats(),
             join: locked.timeline,
             last_answer: *self.inner.last_answer.lock().unwrap_or_else(|p| p.into_inner()),
+        }
+    }
+
+    /// This agent's status as one machine-readable line, `uptime_ms` after its process started.
+    pub fn status_line(&self, uptime_ms: u64) -> StatusLine {
+        let status = self.status();
+        StatusLine {
+            id: status.id.0,
+            ready: status.ready,
+            replica: status.replica.map(|r| r.0),
+            nodes: status.nodes,
+            edges: status.edges,
+            digest: self.digest().map(|d| d.to_string()),
+            peers: status.peers.iter().map(|p| p.0).collect(),
+            rejected: status.rejected,
+            collision: status.collision,
+            uptime_ms,
+            samples_sent: status.transport.samples_sent,
+            samples_received: status.transport.samples_received,
+            calls_served: status.calls_served,
+            node_types: self.read(|r| {
+                let mut counts = std::collections::BTreeMap::<String, u64>::new();
+                for node in r.nodes() {
+                    *counts.entry(node.node_type().to_string()).or_default() += 1;
+                }
+                counts
+            }),
+            wire_bytes_sent: status.transport.wire_bytes_sent,
+            participant_failures: status.transport.participant_failures,
+            participant_rebuilds: status.transport.participant_rebuilds,
         }
     }
 

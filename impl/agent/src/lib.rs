@@ -59,7 +59,7 @@ pub mod life;
 pub mod mutants;
 pub mod status;
 
-pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline};
+pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline, StatusLine};
 pub use calls::{CallError, CallFault, CallReplier, CallServer, PendingCall};
 
 /// A CORTEX agent id (12 bits: 0..4096).

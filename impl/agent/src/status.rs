@@ -92,3 +92,43 @@ pub struct AgentStatus {
     /// The latest graph request this agent answered, if any.
     pub last_answer: Option<AnswerTiming>,
 }
+
+/// One line of an agent's machine-readable status (`cortex agent --json-status` prints one per period, as JSON):
+/// the one type that writers and readers of status lines share, so a renamed field is a parse error, not a 0.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct StatusLine {
+    /// The agent id.
+    pub id: u32,
+    /// Whether it has a graph (joined, or started alone).
+    pub ready: bool,
+    /// The replica id of this life, once ready.
+    pub replica: Option<u32>,
+    /// Visible nodes.
+    pub nodes: usize,
+    /// Visible edges.
+    pub edges: usize,
+    /// The visible graph's digest (the first 8 bytes, hex), once ready.
+    pub digest: Option<String>,
+    /// Peers heard from, by agent id.
+    pub peers: Vec<u32>,
+    /// Samples rejected (foreign, malformed, or refused by the replica).
+    pub rejected: u64,
+    /// An id collision, if one was seen.
+    pub collision: Option<String>,
+    /// Time since the process started, ms.
+    pub uptime_ms: u64,
+    /// Samples published.
+    pub samples_sent: u64,
+    /// Samples received.
+    pub samples_received: u64,
+    /// Call requests addressed to this agent.
+    pub calls_served: u64,
+    /// Visible nodes by node type, once ready.
+    pub node_types: Option<std::collections::BTreeMap<String, u64>>,
+    /// Bytes the transport put on the wire (its estimate where it cannot count them).
+    pub wire_bytes_sent: u64,
+    /// Times a DDS participant failed.
+    pub participant_failures: u64,
+    /// Times the DDS participants were rebuilt after a failure.
+    pub participant_rebuilds: u64,
+}

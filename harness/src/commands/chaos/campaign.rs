@@ -20,7 +20,9 @@ use transport::rng::SplitMix64;
 
 use super::net::{Filter, Network};
 use super::procs::{Launch, Line, Proc, log_tail};
-use super::protocol::{Command, FinalState, Report, StatusLine, WriteRecord, parse_report};
+use agent::StatusLine;
+
+use super::protocol::{Command, FinalState, Report, WriteRecord, parse_report};
 use super::record::{CampaignConfig, EpisodeResult, Event, Recorded, Segment, Shown};
 use super::schedule::{Episode, Fault, Schedule};
 
@@ -301,7 +303,10 @@ impl Campaign {
     fn heard_since(&self, since: Instant) -> bool {
         let running = self.running().count();
         self.running().all(|slot| {
-            self.slots[slot].status.as_ref().is_some_and(|(at, s)| *at >= since && s.ready && s.peers + 1 >= running)
+            self.slots[slot]
+                .status
+                .as_ref()
+                .is_some_and(|(at, s)| *at >= since && s.ready && s.peers.len() + 1 >= running)
         })
     }
 

@@ -7,6 +7,7 @@
 //! (a camera frame) are recorded as the seed that generates their bytes ([`RecordedValue::Pattern`]), so the history
 //! stays small and still says exactly which bytes were written.
 
+use agent::StatusLine;
 use dsr::{CausalContext, Element, NodeId, Value};
 use serde::{Deserialize, Serialize};
 
@@ -43,27 +44,6 @@ pub enum Report {
     },
     /// Its final state.
     Final(FinalState),
-}
-
-/// An agent's status.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct StatusLine {
-    /// Whether it has a graph (joined or started alone).
-    pub ready: bool,
-    /// The replica id of this life.
-    pub replica: Option<u32>,
-    /// The digest of its visible graph (the first 8 bytes, hex).
-    pub digest: Option<String>,
-    /// Visible nodes.
-    pub nodes: usize,
-    /// Visible edges.
-    pub edges: usize,
-    /// Agents it hears.
-    pub peers: usize,
-    /// Samples received.
-    pub samples_received: u64,
-    /// Times its DDS participants were rebuilt after their threads died.
-    pub participant_rebuilds: u64,
 }
 
 /// An agent's final state.

@@ -12,7 +12,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use transport::rtps::RtpsConfig;
 
-use super::protocol::{Command, FinalState, Report, StatusLine, parse_command};
+use super::protocol::{Command, FinalState, Report, parse_command};
 use super::workload::Workload;
 use crate::commands::agent::{AgentTransport, start_rtps_agent_with};
 
@@ -76,8 +76,9 @@ pub fn run(args: ChaosAgentArgs) -> Result<()> {
         // Prints until the process ends (its output closed, or the process exits after the input ends).
         let (agent, out) = (Arc::clone(&agent), Arc::clone(&out));
         let period = Duration::from_millis(args.status_ms.max(1));
+        let started = std::time::Instant::now();
         std::thread::spawn(move || {
-            while print(&out, &Report::Status(status_line(&agent))).is_ok() {
+            while print(&out, &Report::Status(agent.status_line(started.elapsed().as_millis() as u64))).is_ok() {
                 std::thread::sleep(period);
             }
         });
@@ -118,20 +119,6 @@ fn write(agent: &Agent<AgentTransport>, workload: Workload, seq: u64, draw: u64)
         Ok(Ok(record)) => Report::Wrote(record),
         Ok(Err(reason)) => Report::Skipped { seq, reason },
         Err(error) => Report::Skipped { seq, reason: error.to_string() },
-    }
-}
-
-fn status_line(agent: &Agent<AgentTransport>) -> StatusLine {
-    let status = agent.status();
-    StatusLine {
-        ready: status.ready,
-        replica: status.replica.map(|r| r.0),
-        digest: agent.digest().map(|d| d.to_string()),
-        nodes: status.nodes,
-        edges: status.edges,
-        peers: status.peers.len(),
-        samples_received: status.transport.samples_received,
-        participant_rebuilds: status.transport.participant_rebuilds,
     }
 }
 
