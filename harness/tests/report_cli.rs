@@ -195,3 +195,52 @@ fn malformed_experiment_file_is_refused_naming_the_field() {
     assert!(stderr.contains("not a valid experiment file") && stderr.contains("speed"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn experiment_files_take_logs_in_any_container() {
+    let dir = scratch("containers");
+    let (bag, sqlite, ros1_mcap) = (
+        repo("datasets/logs/containers/husky_10s_bz2.bag"),
+        repo("datasets/logs/containers/husky_10s_sqlite3"),
+        repo("datasets/logs/containers/husky_10s_ros1.mcap"),
+    );
+    let set = format!(
+        r#"agents = [2]
+seeds = [3]
+logs = [{{ path = "{bag}", rate = "max" }}, {{ path = "{sqlite}", rate = "max" }}]
+[payload]
+sizes = [16]
+rate_hz = 200
+count = 3
+agents = 2
+transport = "inproc"
+[faults]
+agents = 2
+transports = ["inproc"]
+log = {{ path = "{ros1_mcap}", rate = "max" }}
+variants = [{{ label = "no faults" }}]
+[partition]
+agents = 2
+partition_ms = 50
+rate_hz = 100
+announce_ms = 50
+repetitions = 1
+transports = ["inproc"]
+"#
+    );
+    let config = format!(
+        "name = \"containers\"\ndescription = \"test\"\n{}{}",
+        set.replace("\n[", "\n[quick.").replacen("agents = [2]", "[quick]\nagents = [2]", 1),
+        set.replace("\n[", "\n[full.").replacen("agents = [2]", "[full]\nagents = [2]", 1)
+    );
+    let config_path = dir.join("experiments/containers.toml");
+    std::fs::write(&config_path, config).unwrap();
+    let out = dir.join("out");
+    let output = cortex(&["report", "--config", config_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let results: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    let datasets = results["provenance"]["datasets"].as_array().unwrap();
+    assert_eq!(datasets.len(), 3, "{datasets:?}");
+    assert!(datasets.iter().all(|d| d["sha256"] == d["manifest_sha256"]), "{datasets:?}");
+}

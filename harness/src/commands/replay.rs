@@ -1,8 +1,10 @@
-//! `cortex replay`: replay a ROS 2 MCAP log into the graph through a bridge agent and check that every agent ends
-//! with the same graph.
+//! `cortex replay`: replay a robot log into the graph through a bridge agent and check that every agent ends with the
+//! same graph.
 //!
-//! The log is memory-mapped and read with `replay::log` (damage is an error that says where, or, with
-//! `--recover`, the end of what is replayed); messages are paced at the recorded timing divided by `--rate` (or as
+//! The log — an MCAP file (ROS 2 `cdr` or ROS 1 `ros1` messages), a ROS 1 bag (v2.0) or a rosbag2 directory (sqlite3
+//! or MCAP storage), detected from its content — is read with `replay::log` (damage is an error that says where, or,
+//! with `--recover`, the end of what is replayed); messages of types the bridge has no decoder for are decoded from
+//! the definitions the log carries (`--opaque` carries them as raw bytes instead); messages are paced at the recorded timing divided by `--rate` (or as
 //! fast as possible with `--rate max`) and looped `--loop` times; the bridge writes them into its replica and its
 //! deltas go to the other agents. With `--transport inproc` the agents are replicas in this process joined by the
 //! seeded in-memory delivery of `replay::inproc`. With `--transport rtps` the bridge is an agent in this process
@@ -46,7 +48,8 @@ pub enum Transport {
 /// defaults shown.
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
-    /// A ROS 2 MCAP file (`cdr` messages, `ros2msg` schemas); may come from `--config` instead.
+    /// A log: an MCAP file (`cdr` or `ros1` messages), a ROS 1 bag (v2.0) or a rosbag2 directory (sqlite3 or mcap
+    /// storage), detected from its content; may come from `--config` instead.
     file: Option<PathBuf>,
     /// A replay configuration (TOML): any of `log`, `agents`, `transport`, `rate`, `loops`, `topics`, `roles`,
     /// `faults`, `seed`, `window`, `domain`, `settle_ms`; relative paths against the parent of the file's
@@ -71,7 +74,8 @@ pub struct ReplayArgs {
     /// Replay what is readable before damage in the file instead of failing.
     #[arg(long)]
     recover: bool,
-    /// Carry messages of unknown types as opaque byte attributes instead of skipping them.
+    /// Carry messages of types the bridge has no decoder for as opaque byte attributes, instead of decoding them
+    /// from the definitions the log carries (or skipping them when it carries none).
     #[arg(long)]
     opaque: bool,
     /// Seed of the in-process delivery order [default: 1].
@@ -182,7 +186,7 @@ fn resolve(args: ReplayArgs) -> anyhow::Result<Resolved> {
     let log = match (args.file, file.log) {
         (Some(path), _) => path,
         (None, Some(path)) => root.join(path),
-        (None, None) => bail!("no log to replay: give FILE.mcap, or `log` in --config"),
+        (None, None) => bail!("no log to replay: give a log (FILE.mcap, FILE.bag, a rosbag2 directory), or `log` in --config"),
     };
     Ok(Resolved {
         file: log,
@@ -209,6 +213,8 @@ fn resolve(args: ReplayArgs) -> anyhow::Result<Resolved> {
 #[derive(Debug, Serialize)]
 struct Summary {
     file: String,
+    /// The log's container (`mcap`, `ros1 bag`, `rosbag2 sqlite3`, `rosbag2 mcap`).
+    container: &'static str,
     transport: &'static str,
     agents: u32,
     rate: String,
@@ -376,6 +382,7 @@ fn summary(
 ) -> Summary {
     Summary {
         file: args.file.display().to_string(),
+        container: log.container.name(),
         transport,
         agents: args.agents,
         rate: rate_text(args.rate),
@@ -463,8 +470,8 @@ fn text(s: &Summary) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "replay {} ({} bytes) over {} with {} agents, rate {}, {} loop(s)",
-        s.file, s.file_bytes, s.transport, s.agents, s.rate, s.loops
+        "replay {} ({}, {} bytes) over {} with {} agents, rate {}, {} loop(s)",
+        s.file, s.container, s.file_bytes, s.transport, s.agents, s.rate, s.loops
     );
     if let Some(faults) = &s.faults {
         let _ = writeln!(out, "  faults        {faults} (on what each agent process receives)");
@@ -483,6 +490,7 @@ fn text(s: &Summary) -> String {
         }
     };
     table(&mut out, "decoded", &s.bridge.decoded);
+    table(&mut out, "described", &s.bridge.described);
     table(&mut out, "unknown", &s.bridge.unknown);
     let b = &s.bridge;
     let _ = writeln!(

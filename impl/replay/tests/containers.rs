@@ -302,3 +302,16 @@ fn definition_that_does_not_parse_is_an_error_for_its_topic_only() {
     assert!(first.contains("definition of acme_radar_msgs/RadarScan: line "), "{first}");
     assert!(first.contains("`?` is not an array length"), "{first}");
 }
+
+#[test]
+fn humble_sqlite_without_definitions_reads_and_counts_custom_types_as_unknown() {
+    let dir = copy_dir("custom_radar_diag_sqlite3", "humble");
+    let db = rusqlite::Connection::open(dir.join("custom_radar_diag_sqlite3.db3")).unwrap();
+    db.execute_batch("DROP TABLE message_definitions").unwrap();
+    drop(db);
+    let log = Log::open(&dir, ReadOptions::default()).unwrap();
+    assert_eq!(log.messages.len(), 20);
+    let (stats, ..) = replay_log(&log, BridgeOptions::default());
+    assert!(stats.described.is_empty());
+    assert_eq!(stats.unknown["acme_radar_msgs/msg/RadarScan"], 10);
+}
