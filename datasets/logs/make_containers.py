@@ -1,6 +1,8 @@
 """Writes the same real logs in the other containers robot logs come in, and a log of custom messages.
 
 Run from the repository root: python3 datasets/logs/make_containers.py
+For the throughput figures of the README: python3 datasets/logs/make_containers.py --bench DIR writes the whole bundled
+SICK (10 s) and EuRoC (1 s) logs in every container to DIR (not bundled: about 50 MB).
 Needs the Python packages `rosbags` (0.11, which converts between ROS 2 MCAP, ROS 1 bags and rosbag2 directories),
 `mcap` (1.x) and `lz4`. Writes datasets/logs/containers/ and the `containers` section of datasets/logs/manifest.json.
 
@@ -204,7 +206,25 @@ def manifest_entries():
     return entries
 
 
+def bench(out):
+    """The bundled SICK and EuRoC logs whole, in every container, in `out` (for throughput measurements)."""
+    global OUT
+    OUT = out
+    os.makedirs(OUT, exist_ok=True)
+    for name, log in [("sick", "sick_tim7xx_scan_10s.mcap"), ("euroc", "euroc_v1_01_easy_cam0_1s.mcap")]:
+        shutil.copyfile(os.path.join(LOGS, log), os.path.join(OUT, f"{name}.mcap"))
+        convert(f"{name}.mcap", f"{name}.bag")
+        rechunk(f"{name}.bag", f"{name}_bz2.bag", "bz2", 768 * 1024)
+        rechunk(f"{name}.bag", f"{name}_lz4.bag", "lz4", 768 * 1024)
+        bag_to_ros1_mcap(f"{name}_lz4.bag", f"{name}_ros1.mcap")
+        convert(f"{name}.mcap", f"{name}_sqlite3", "--dst-storage", "sqlite3")
+        convert(f"{name}.mcap", f"{name}_rosbag2_mcap", "--dst-storage", "mcap")
+
+
 def main():
+    if sys.argv[1:2] == ["--bench"]:
+        bench(os.path.abspath(sys.argv[2]))
+        return
     os.makedirs(OUT, exist_ok=True)
     excerpt("husky_gps_imu_odom_robot_localization_test1.mcap", "husky_10s.mcap", 10, CompressionType.ZSTD)
     excerpt("sick_tim7xx_scan_10s.mcap", "sick_1s.mcap", 1, CompressionType.LZ4)

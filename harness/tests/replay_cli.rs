@@ -291,7 +291,8 @@ fn custom_messages_are_described_or_carried_opaque() {
     assert_eq!(summary["bridge"]["opaque"], 20);
     let out = cortex(&["replay", &repo("datasets/logs/containers/custom_radar_diag_sqlite3"), "--rate", "max"]);
     let text = String::from_utf8_lossy(&out.stdout);
-    let described = text.lines().any(|line| line.starts_with("  described") && line.ends_with("10  acme_radar_msgs/msg/RadarScan"));
+    let described =
+        text.lines().any(|line| line.starts_with("  described") && line.ends_with("10  acme_radar_msgs/msg/RadarScan"));
     assert!(text.contains("(rosbag2 sqlite3, ") && described, "{text}");
 }
 
@@ -305,7 +306,10 @@ fn damaged_bag_and_sqlite_are_errors_that_say_where_and_recover() {
     let out = cortex(&["replay", cut.to_str().unwrap(), "--rate", "max"]);
     assert_eq!(out.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("cut.mcap: ") && stderr.contains(" record at byte ") && stderr.contains("truncated"), "{stderr}");
+    assert!(
+        stderr.contains("cut.mcap: ") && stderr.contains(" record at byte ") && stderr.contains("truncated"),
+        "{stderr}"
+    );
     let summary = replay_json(cut.to_str().unwrap(), &["--recover"]);
     assert_eq!(summary["container"], "ros1 bag", "detected from the content, not the name");
     assert!(summary["messages"].as_u64().unwrap() > 0 && summary["damage"].is_string());

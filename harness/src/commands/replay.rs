@@ -186,7 +186,9 @@ fn resolve(args: ReplayArgs) -> anyhow::Result<Resolved> {
     let log = match (args.file, file.log) {
         (Some(path), _) => path,
         (None, Some(path)) => root.join(path),
-        (None, None) => bail!("no log to replay: give a log (FILE.mcap, FILE.bag, a rosbag2 directory), or `log` in --config"),
+        (None, None) => {
+            bail!("no log to replay: give a log (FILE.mcap, FILE.bag, a rosbag2 directory), or `log` in --config")
+        }
     };
     Ok(Resolved {
         file: log,
@@ -224,6 +226,10 @@ struct Summary {
     unread_bytes: u64,
     messages: u64,
     payload_bytes: u64,
+    /// Seconds spent reading the log (mapping, decompressing, indexing, sorting) before the replay.
+    read_seconds: f64,
+    /// Payload MB per second of reading and replaying together.
+    read_megabytes_per_second: f64,
     seconds: f64,
     messages_per_second: f64,
     megabytes_per_second: f64,
@@ -282,7 +288,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     let options = ReadOptions { recover: args.recover, ..ReadOptions::default() };
+    let reading = Instant::now();
     let log = Log::open(&args.file, options).context("cannot replay")?;
+    let read_seconds = reading.elapsed().as_secs_f64();
     if let Some(damage) = &log.damage {
         eprintln!(
             "warning: {}: {damage}; replaying the {} messages read before it ({} bytes unread)",
@@ -292,7 +300,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     if args.transport == Transport::Rtps {
-        return run_rtps(&args, &log);
+        return run_rtps(&args, &log, read_seconds);
     }
     let dictionary = replay::bridge::dictionary().context("bridge dictionary")?;
     let mut replica = Replica::with_dictionary(ReplicaId(1), dictionary.clone());
@@ -365,19 +373,19 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         digests: digest_strings,
         digests_equal,
         recording,
-        ..summary(&args, &log, "inproc", &driven, seconds, bridge.stats().clone())
+        ..summary(&args, &log, "inproc", &driven, [read_seconds, seconds], bridge.stats().clone())
     };
     finish(&args, &summary)
 }
 
 /// The part of a summary both transports fill alike; what differs (bytes, deliveries, digests, agents,
-/// recording) is set by the caller.
+/// recording) is set by the caller. `[read_seconds, seconds]`: reading the log, and replaying it.
 fn summary(
     args: &Resolved,
     log: &Log,
     transport: &'static str,
     drive: &inproc::DriveStats,
-    seconds: f64,
+    [read_seconds, seconds]: [f64; 2],
     bridge: BridgeStats,
 ) -> Summary {
     Summary {
@@ -392,6 +400,8 @@ fn summary(
         unread_bytes: log.unread_bytes,
         messages: drive.messages,
         payload_bytes: drive.bytes,
+        read_seconds,
+        read_megabytes_per_second: drive.bytes as f64 / 1e6 / (read_seconds + seconds).max(1e-9),
         seconds,
         messages_per_second: drive.messages as f64 / seconds.max(1e-9),
         megabytes_per_second: drive.bytes as f64 / 1e6 / seconds.max(1e-9),
@@ -429,7 +439,7 @@ fn finish(args: &Resolved, summary: &Summary) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
+fn run_rtps(args: &Resolved, log: &Log, read_seconds: f64) -> anyhow::Result<()> {
     let config = super::replay_rtps::RtpsReplay {
         agents: args.agents,
         domain: args.domain,
@@ -461,7 +471,14 @@ fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
             latency: None,
             convergence: None,
         }),
-        ..summary(args, log, "rtps", &outcome.played.drive, outcome.seconds, outcome.played.bridge.clone())
+        ..summary(
+            args,
+            log,
+            "rtps",
+            &outcome.played.drive,
+            [read_seconds, outcome.seconds],
+            outcome.played.bridge.clone(),
+        )
     };
     finish(args, &summary)
 }
@@ -483,6 +500,11 @@ fn text(s: &Summary) -> String {
         out,
         "  messages      {} in {:.3} s: {:.0} messages/s, {:.1} MB/s of payload ({} bytes)",
         s.messages, s.seconds, s.messages_per_second, s.megabytes_per_second, s.payload_bytes
+    );
+    let _ = writeln!(
+        out,
+        "  read          in {:.3} s before the replay: {:.1} MB/s of payload read and replayed",
+        s.read_seconds, s.read_megabytes_per_second
     );
     let table = |out: &mut String, title: &str, rows: &BTreeMap<String, u64>| {
         for (name, count) in rows {

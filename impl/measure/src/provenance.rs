@@ -114,11 +114,8 @@ fn manifest_sha256(dir: &Path, path: &Path) -> Option<String> {
     let text = std::fs::read_to_string(dir.join("manifest.json")).ok()?;
     let manifest: serde_json::Value = serde_json::from_str(&text).ok()?;
     let relative = path.strip_prefix(dir).ok()?.to_string_lossy().replace('\\', "/");
-    let entries: Vec<&serde_json::Value> = ["files", "containers"]
-        .iter()
-        .filter_map(|list| manifest[list].as_array())
-        .flatten()
-        .collect();
+    let entries: Vec<&serde_json::Value> =
+        ["files", "containers"].iter().filter_map(|list| manifest[list].as_array()).flatten().collect();
     let sha = |entry: &serde_json::Value| entry["sha256"].as_str().map(str::to_owned);
     if !path.is_dir() {
         return entries.iter().find(|entry| entry["file"] == relative.as_str()).and_then(|entry| sha(entry));

@@ -118,6 +118,34 @@ fn record_at(buf: &[u8], pos: usize) -> Result<Record<'_>, (&'static str, Damage
     Ok(Record { op, fields, data: start..cursor.pos, end: cursor.pos })
 }
 
+/// Damage of a `record` at file offset `pos`, the file read up to there.
+fn fail_at(pos: usize, record: &'static str, kind: DamageKind) -> Failure {
+    (Place::file(pos as u64).damage(record, kind), pos as u64)
+}
+
+/// The magic line and the bag header: the header's `index_pos`, `chunk_count`, and where the next record starts.
+fn read_bag_header(file: &[u8]) -> Result<(u64, u32, usize), Failure> {
+    if !file.starts_with(BAG_MAGIC) {
+        let kind = if file.starts_with(b"#ROSBAG V") {
+            let version = file[9..file.len().min(16)].split(|&b| b == b'\n').next().unwrap_or_default();
+            let what = format!("version {} (only 2.0 is read)", String::from_utf8_lossy(version));
+            DamageKind::BadField { field: "version", what }
+        } else {
+            DamageKind::BadMagic
+        };
+        return Err(fail_at(0, "magic", kind));
+    }
+    let at = BAG_MAGIC.len();
+    let header = record_at(file, at).map_err(|(name, kind)| fail_at(at, name, kind))?;
+    if header.op != OP_BAG_HEADER {
+        let what = format!("the first record is a {} record, not the bag header", record_name(header.op));
+        return Err(fail_at(at, "bag header", DamageKind::BadField { field: "op", what }));
+    }
+    let index_pos = header.u64("index_pos").map_err(|kind| fail_at(at, "bag header", kind))?;
+    let chunk_count = header.u32("chunk_count").map_err(|kind| fail_at(at, "bag header", kind))?;
+    Ok((index_pos, chunk_count, header.end))
+}
+
 struct BagReader {
     options: ReadOptions,
     contents: Contents,
@@ -131,50 +159,35 @@ struct BagReader {
 
 impl BagReader {
     fn read_file(&mut self, file: &Bytes) -> Result<(), Failure> {
-        if !file.starts_with(BAG_MAGIC) {
-            let kind = match file.starts_with(b"#ROSBAG V") {
-                true => {
-                    let version = file[9..file.len().min(16)].split(|&b| b == b'\n').next().unwrap_or_default();
-                    let what = format!("version {} (only 2.0 is read)", String::from_utf8_lossy(version));
-                    DamageKind::BadField { field: "version", what }
-                }
-                false => DamageKind::BadMagic,
-            };
-            return Err((Place::file(0).damage("magic", kind), 0));
-        }
-        let header_pos = BAG_MAGIC.len();
-        let fail_at = |pos: usize, record, kind| (Place::file(pos as u64).damage(record, kind), pos as u64);
-        let header = record_at(file, header_pos).map_err(|(name, kind)| fail_at(header_pos, name, kind))?;
-        if header.op != OP_BAG_HEADER {
-            let what = format!("the first record is a {} record, not the bag header", record_name(header.op));
-            return Err(fail_at(header_pos, "bag header", DamageKind::BadField { field: "op", what }));
-        }
-        let header_field = |name| header.u64(name).map_err(|kind| fail_at(header_pos, "bag header", kind));
-        let index_pos = header_field("index_pos")?;
-        let chunk_count = header.u32("chunk_count").map_err(|kind| fail_at(header_pos, "bag header", kind))?;
-        let mut pos = header.end;
+        let (index_pos, chunk_count, mut pos) = read_bag_header(file)?;
         while pos < file.len() {
             self.index_seen |= pos as u64 == index_pos;
             let record = record_at(file, pos).map_err(|(name, kind)| fail_at(pos, name, kind))?;
             self.read_record(file, &record, pos).map_err(|damage| (damage, pos as u64))?;
             pos = record.end;
         }
-        let missing = match () {
-            () if index_pos == 0 => Some("the bag header's index_pos is 0: the recording was not closed".to_owned()),
-            () if index_pos >= file.len() as u64 => Some(format!(
-                "the bag header's index_pos {index_pos} is past the end of the file ({} bytes): it was cut",
-                file.len()
-            )),
-            () if !self.index_seen => Some(format!("no record starts at the bag header's index_pos {index_pos}")),
-            () if self.chunk_infos != chunk_count => Some(format!(
-                "the index lists {} chunks, the bag header {chunk_count}",
-                self.chunk_infos
-            )),
-            () => None,
-        };
-        match missing {
-            Some(what) => Err((Place::file(header_pos as u64).damage("bag header", DamageKind::NoIndex(what)), pos as u64)),
+        match self.index_problem(index_pos, chunk_count, file.len()) {
+            Some(what) => {
+                Err((Place::file(BAG_MAGIC.len() as u64).damage("bag header", DamageKind::NoIndex(what)), pos as u64))
+            }
             None => Ok(()),
+        }
+    }
+
+    /// What is wrong with the index, once every record was read: `None` if it is where the bag header says and
+    /// lists every chunk.
+    fn index_problem(&self, index_pos: u64, chunk_count: u32, file_bytes: usize) -> Option<String> {
+        if index_pos == 0 {
+            Some("the bag header's index_pos is 0: the recording was not closed".to_owned())
+        } else if index_pos >= file_bytes as u64 {
+            let what = "is past the end of the file";
+            Some(format!("the bag header's index_pos {index_pos} {what} ({file_bytes} bytes): it was cut"))
+        } else if !self.index_seen {
+            Some(format!("no record starts at the bag header's index_pos {index_pos}"))
+        } else if self.chunk_infos != chunk_count {
+            Some(format!("the index lists {} chunks, the bag header {chunk_count}", self.chunk_infos))
+        } else {
+            None
         }
     }
 
@@ -258,7 +271,8 @@ impl BagReader {
                 metadata.insert(name.to_owned(), String::from_utf8_lossy(value).into_owned());
             }
         }
-        let channel = Channel { id, topic, message_encoding: "ros1".to_owned(), schema: Some(schema.clone()), metadata };
+        let channel =
+            Channel { id, topic, message_encoding: "ros1".to_owned(), schema: Some(schema.clone()), metadata };
         self.contents.schemas.insert(schema_id, schema);
         self.contents.channels.insert(id, Arc::new(channel));
         Ok(())

@@ -327,14 +327,14 @@ impl Log {
         let name = path.display().to_string();
         if path.is_dir() {
             let (container, contents) = crate::rosbag2::read_dir(path, options)?;
-            return Ok(contents.into_log(&name, container, options));
+            return Ok(contents.into_log(&name, container));
         }
         let open_error = |source| LogError::Open { path: name.clone(), source };
         let file = std::fs::File::open(path).map_err(open_error)?;
         let bytes = map_file(&file).map_err(open_error)?;
         if Container::detect(&bytes) == Some(Container::Rosbag2Sqlite3) {
             let contents = crate::rosbag2::read_sqlite(path, &name, options)?;
-            return Ok(contents.into_log(&name, Container::Rosbag2Sqlite3, options));
+            return Ok(contents.into_log(&name, Container::Rosbag2Sqlite3));
         }
         Log::from_bytes(&name, bytes, options)
     }
@@ -355,7 +355,7 @@ impl Log {
             _ => (Container::Mcap, crate::mcap::read(&bytes, options)),
         };
         let contents = contents.check(name, options)?;
-        Ok(contents.into_log(name, container, options))
+        Ok(contents.into_log(name, container))
     }
 
     /// Log time of the first and last message, if any.
@@ -393,7 +393,7 @@ impl Contents {
     }
 
     /// The log, its messages sorted by log time (file order among equal times).
-    pub fn into_log(self, name: &str, container: Container, _options: ReadOptions) -> Log {
+    pub fn into_log(self, name: &str, container: Container) -> Log {
         let (damage, unread_bytes) = match self.failure {
             None => (None, 0),
             Some((damage, resume)) => (Some(damage), self.input_bytes.saturating_sub(resume)),
@@ -498,7 +498,6 @@ impl<'a> Fields<'a> {
         self.pos..self.bytes.len()
     }
 }
-
 
 /// Where a record sits: in the file, or inside a chunk's records.
 #[derive(Clone, Copy)]

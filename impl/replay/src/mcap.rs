@@ -89,10 +89,7 @@ impl Reader {
                         return Err((Place::file(end as u64).damage("magic", kind), end as u64));
                     }
                     if &tail[..MAGIC.len()] != MAGIC {
-                        return Err((
-                            Place::file(end as u64).damage("magic", DamageKind::BadMagic),
-                            end as u64,
-                        ));
+                        return Err((Place::file(end as u64).damage("magic", DamageKind::BadMagic), end as u64));
                     }
                     return Ok(());
                 }
@@ -138,7 +135,10 @@ impl Reader {
                     return Err(fail(DamageKind::BadField { field: "id", what: "schema id 0 is reserved".into() }));
                 }
                 let data = buf.slice(body.start + data.start..body.start + data.end);
-                self.contents.schemas.entry(id).or_insert_with(|| Arc::new(Schema { id, name: schema_name, encoding, data }));
+                self.contents
+                    .schemas
+                    .entry(id)
+                    .or_insert_with(|| Arc::new(Schema { id, name: schema_name, encoding, data }));
             }
             OP_CHANNEL => {
                 let id = fields.u16("id").map_err(fail)?;
@@ -149,13 +149,15 @@ impl Reader {
                 let schema = match schema_id {
                     0 => None,
                     _ => Some(
-                        self.contents.schemas
+                        self.contents
+                            .schemas
                             .get(&schema_id)
                             .cloned()
                             .ok_or_else(|| fail(DamageKind::UnknownSchema { channel: id, schema: schema_id }))?,
                     ),
                 };
-                self.contents.channels
+                self.contents
+                    .channels
                     .entry(id)
                     .or_insert_with(|| Arc::new(Channel { id, topic, message_encoding, schema, metadata }));
             }
@@ -205,7 +207,9 @@ impl Reader {
         let records = match compression.as_str() {
             "" => compressed,
             "zstd" | "lz4" => Bytes::from(decompress(&compression, &compressed, declared).map_err(fail)?),
-            other => return Err(fail(DamageKind::Compression { found: other.to_owned(), supported: "none, zstd, lz4" })),
+            other => {
+                return Err(fail(DamageKind::Compression { found: other.to_owned(), supported: "none, zstd, lz4" }));
+            }
         };
         if records.len() as u64 != declared {
             return Err(fail(DamageKind::Size { declared, found: records.len() as u64 }));
@@ -245,4 +249,3 @@ fn record_at(buf: &[u8], pos: usize) -> Result<(u8, std::ops::Range<usize>), (&'
     fields.take("record body", len).map_err(|kind| (name, kind))?;
     Ok((opcode, start..fields.pos))
 }
-

@@ -172,7 +172,10 @@ impl Definitions {
                     continue;
                 }
                 let Some(name) = trimmed.strip_prefix("MSG:") else {
-                    return Err(error(number, "a section after a line of `=` must start with `MSG: package/Type`".into()));
+                    return Err(error(
+                        number,
+                        "a section after a line of `=` must start with `MSG: package/Type`".into(),
+                    ));
                 };
                 current.0 = normalize_type(name.trim());
                 expect_msg_line = false;
@@ -230,7 +233,8 @@ fn parse_line(line: &str, package: &str) -> Result<Option<Field>, String> {
     if line.is_empty() || line.starts_with('#') {
         return Ok(None);
     }
-    let (type_token, rest) = line.split_once(char::is_whitespace).ok_or_else(|| format!("`{line}` has no field name"))?;
+    let (type_token, rest) =
+        line.split_once(char::is_whitespace).ok_or_else(|| format!("`{line}` has no field name"))?;
     let rest = rest.trim_start();
     if let Some((name, _)) = rest.split_once('=')
         && is_identifier(name.trim())

@@ -167,9 +167,11 @@ fn read_tables(path: &Path, contents: &mut Contents) -> Result<(), Damage> {
 fn read_definitions(db: &Connection) -> Result<BTreeMap<String, (String, String)>, Damage> {
     let fail = |e: rusqlite::Error| table_damage("message_definitions", "message definition", 0, e);
     let exists: bool = db
-        .query_row("SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'message_definitions'", [], |row| {
-            row.get::<_, i64>(0)
-        })
+        .query_row(
+            "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'message_definitions'",
+            [],
+            |row| row.get::<_, i64>(0),
+        )
         .map(|count| count > 0)
         .map_err(|e| table_damage("sqlite_master", "table", 0, e))?;
     let mut definitions = BTreeMap::new();
@@ -195,7 +197,8 @@ fn read_topics(
     let fail = |row: i64| move |e: rusqlite::Error| table_damage("topics", "topic", row, e);
     let mut statement =
         db.prepare("SELECT id, name, type, serialization_format FROM topics ORDER BY id").map_err(fail(0))?;
-    let rows = statement.query_map([], |row| Ok((row.get(0)?, row.get(1)?, row.get(2)?, row.get(3)?))).map_err(fail(0))?;
+    let rows =
+        statement.query_map([], |row| Ok((row.get(0)?, row.get(1)?, row.get(2)?, row.get(3)?))).map_err(fail(0))?;
     let mut by_topic_id = BTreeMap::new();
     for row in rows {
         let (topic_id, topic, type_name, format): (i64, String, String, String) = row.map_err(fail(0))?;
@@ -226,7 +229,8 @@ fn read_messages(
     contents: &mut Contents,
 ) -> Result<(), Damage> {
     let fail = |row: i64| move |e: rusqlite::Error| table_damage("messages", "message", row, e);
-    let mut statement = db.prepare("SELECT id, topic_id, timestamp, data FROM messages ORDER BY id").map_err(fail(0))?;
+    let mut statement =
+        db.prepare("SELECT id, topic_id, timestamp, data FROM messages ORDER BY id").map_err(fail(0))?;
     let mut rows = statement.query([]).map_err(fail(0))?;
     let mut last_row = 0;
     let mut sequence = 0u32;

@@ -213,8 +213,8 @@ fn bag_without_index_is_an_error_and_recovery_reads_every_chunk() {
     // Cut just before the index section: every chunk is whole, the index is gone.
     let bytes = bag_bytes("husky_10s_lz4.bag");
     let index_pos = u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize;
-    let error = Log::from_bytes("cut.bag", Bytes::from(bytes[..index_pos].to_vec()), ReadOptions::default())
-        .unwrap_err();
+    let error =
+        Log::from_bytes("cut.bag", Bytes::from(bytes[..index_pos].to_vec()), ReadOptions::default()).unwrap_err();
     assert!(error.to_string().contains("past the end of the file"), "{error}");
 }
 
