@@ -317,12 +317,14 @@ fn damaged_bag_and_sqlite_are_errors_that_say_where_and_recover() {
     std::fs::create_dir_all(&db_dir).unwrap();
     let source = PathBuf::from(repo("datasets/logs/containers/husky_10s_sqlite3"));
     std::fs::copy(source.join("metadata.yaml"), db_dir.join("metadata.yaml")).unwrap();
-    let db = std::fs::read(source.join("husky_10s_sqlite3.db3")).unwrap();
-    std::fs::write(db_dir.join("husky_10s_sqlite3.db3"), &db[..db.len() / 2]).unwrap();
+    let mut db = std::fs::read(source.join("husky_10s_sqlite3.db3")).unwrap();
+    db[30 * 4096..31 * 4096].fill(0xA5);
+    std::fs::write(db_dir.join("husky_10s_sqlite3.db3"), &db).unwrap();
     let out = cortex(&["replay", db_dir.to_str().unwrap(), "--rate", "max"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("in table `"), "{stderr}");
+    assert!(stderr.contains(" of table `messages`: sqlite: database disk image is malformed"), "{stderr}");
     let summary = replay_json(db_dir.to_str().unwrap(), &["--recover"]);
     std::fs::remove_dir_all(&dir).unwrap();
-    assert!(summary["damage"].as_str().unwrap().contains("in table `"), "{summary}");
+    assert!(summary["damage"].as_str().unwrap().contains(" of table `messages`"), "{summary}");
+    assert!(summary["messages"].as_u64().unwrap() > 100, "{summary}");
 }

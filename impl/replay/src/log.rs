@@ -95,8 +95,8 @@ pub enum LogError {
     Damaged {
         /// The file's name as given.
         file: String,
-        /// Where and what.
-        damage: Damage,
+        /// Where and what (boxed: a damage is large and errors are rare).
+        damage: Box<Damage>,
     },
 }
 
@@ -119,7 +119,10 @@ pub struct Damage {
 impl fmt::Display for Damage {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if let Some(table) = self.table {
-            return write!(f, "{} in table `{table}` at row {}: {}", self.record, self.offset, self.kind);
+            return match self.offset {
+                0 => write!(f, "table `{table}`: {}", self.kind),
+                row => write!(f, "{} at row {row} of table `{table}`: {}", self.record, self.kind),
+            };
         }
         match self.chunk {
             Some(chunk) => write!(
@@ -350,7 +353,7 @@ impl Log {
             Some(Container::Rosbag2Sqlite3) => {
                 let kind = DamageKind::Metadata("an SQLite storage file must be opened from its path".to_owned());
                 let damage = Place::file(0).damage("magic", kind);
-                return Err(LogError::Damaged { file: name.to_owned(), damage });
+                return Err(LogError::Damaged { file: name.to_owned(), damage: Box::new(damage) });
             }
             _ => (Container::Mcap, crate::mcap::read(&bytes, options)),
         };
@@ -386,7 +389,7 @@ impl Contents {
     pub fn check(self, name: &str, options: ReadOptions) -> Result<Contents, LogError> {
         match &self.failure {
             Some((damage, _)) if !options.recover => {
-                Err(LogError::Damaged { file: name.to_owned(), damage: damage.clone() })
+                Err(LogError::Damaged { file: name.to_owned(), damage: Box::new(damage.clone()) })
             }
             _ => Ok(self),
         }

@@ -74,7 +74,7 @@ pub(crate) fn read_dir(dir: &Path, options: ReadOptions) -> Result<(Container, C
     let metadata = std::fs::read_to_string(&metadata_path).map(|text| Metadata::parse(&text));
     let metadata_damage = |what: String| LogError::Damaged {
         file: metadata_path.display().to_string(),
-        damage: Place::file(0).damage("metadata.yaml", DamageKind::Metadata(what)),
+        damage: Box::new(Place::file(0).damage("metadata.yaml", DamageKind::Metadata(what))),
     };
     let metadata = match metadata {
         Ok(metadata) => metadata,

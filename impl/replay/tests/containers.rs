@@ -260,20 +260,25 @@ fn corrupt_sqlite_file_names_the_table() {
     let LogError::Damaged { file, damage } = &error else { panic!("{error}") };
     assert!(file.ends_with("husky_10s_sqlite3.db3"), "{error}");
     assert!(damage.table.is_some(), "{error}");
-    assert!(error.to_string().contains("in table `"), "{error}");
+    assert!(error.to_string().contains("table `sqlite_master`: sqlite: file is not a database"), "{error}");
 }
 
 #[test]
-fn truncated_sqlite_file_recovers_the_rows_before_the_damage() {
-    let dir = copy_dir("husky_10s_sqlite3", "truncated");
+fn corrupt_sqlite_page_is_an_error_at_its_row_and_recovery_keeps_the_rows_before() {
+    let dir = copy_dir("husky_10s_sqlite3", "page");
     let db = dir.join("husky_10s_sqlite3.db3");
-    let bytes = std::fs::read(&db).unwrap();
-    std::fs::write(&db, &bytes[..bytes.len() / 2]).unwrap();
+    let mut bytes = std::fs::read(&db).unwrap();
+    bytes[30 * 4096..31 * 4096].fill(0xA5);
+    std::fs::write(&db, &bytes).unwrap();
     let error = Log::open(&dir, ReadOptions::default()).unwrap_err();
-    assert!(error.to_string().contains("table `"), "{error}");
+    let LogError::Damaged { damage, .. } = &error else { panic!("{error}") };
+    assert_eq!((damage.table, damage.record), (Some("messages"), "message"), "{error}");
+    assert!(error.to_string().contains(" of table `messages`: sqlite: "), "{error}");
     let recovered = Log::open(&dir, RECOVER).unwrap();
-    assert!(recovered.damage.is_some());
-    assert!(recovered.messages.len() < 426, "{}", recovered.messages.len());
+    let n = recovered.messages.len();
+    assert!(n > 100 && n < 426, "{n}");
+    assert_eq!(recovered.damage.as_ref().unwrap().offset, n as u64 + 1, "the first row not read");
+    assert_eq!(timeline(&recovered), timeline(&open("husky_10s_sqlite3"))[..n].to_vec());
 }
 
 #[test]

@@ -85,7 +85,7 @@ fn chunk_with_undefined_channel_is_an_error_that_says_where() {
     assert_eq!(damage.offset, 0, "{text}");
     let recovered = Log::open(&path, ReadOptions { recover: true, ..ReadOptions::default() }).unwrap();
     assert!(recovered.messages.is_empty());
-    assert_eq!(recovered.damage.as_ref(), Some(damage));
+    assert_eq!(recovered.damage.as_ref(), Some(&**damage));
     assert!(recovered.unread_bytes > 0);
 }
 
