@@ -220,13 +220,34 @@ fn bag_without_index_is_an_error_and_recovery_reads_every_chunk() {
 
 #[test]
 fn damaged_bags_never_panic() {
-    let bytes = bag_bytes("sick_1s_lz4.bag");
-    for step in 0..64 {
-        let mut damaged = bytes.clone();
-        let at = (step * 7919 * 31) % damaged.len();
-        damaged[at] ^= 1 << (step % 8);
-        let cut = damaged.len() - (step * 997) % 4096;
-        let _ = Log::from_bytes("x.bag", Bytes::from(damaged[..cut].to_vec()), RECOVER);
+    for name in ["sick_1s_lz4.bag", "husky_10s_bz2.bag"] {
+        let bytes = bag_bytes(name);
+        for step in 0..48 {
+            let mut damaged = bytes.clone();
+            let at = (step * 7919 * 31) % damaged.len();
+            damaged[at] ^= 1 << (step % 8);
+            let cut = damaged.len() - (step * 997) % 4096;
+            let _ = Log::from_bytes("x.bag", Bytes::from(damaged[..cut].to_vec()), RECOVER);
+        }
+    }
+}
+
+#[test]
+fn every_prefix_of_a_described_payload_is_an_error_not_a_panic() {
+    for name in ["custom_radar_diag.bag", "custom_radar_diag_rosbag2_mcap"] {
+        let log = open(name);
+        for message in &log.messages {
+            let schema = message.channel.schema.as_ref().unwrap();
+            let text = String::from_utf8_lossy(&schema.data);
+            let definitions = replay::msgdef::Definitions::parse(&schema.name, &text).unwrap();
+            let encoding = Encoding::from_message_encoding(&message.channel.message_encoding).unwrap();
+            let limits = replay::generic::Limits::default();
+            assert!(replay::generic::decode(&definitions, encoding, &message.data, limits).is_ok());
+            for cut in 0..message.data.len() {
+                let prefix = message.data.slice(..cut);
+                assert!(replay::generic::decode(&definitions, encoding, &prefix, limits).is_err(), "{name} {cut}");
+            }
+        }
     }
 }
 
