@@ -96,10 +96,13 @@ for name, info in SOURCES.items():
             last = message.log_time
     files.append({
         "file": name, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest(),
-        "log_start_ns": first, "log_end_ns": last, **info,
+        "container": "mcap", "encoding": "cdr", "log_start_ns": first, "log_end_ns": last, **info,
         "topics": sorted(topics.values(), key=lambda t: t["topic"]),
     })
-with open(os.path.join(OUT, "manifest.json"), "w") as f:
-    json.dump({"version": 1, "files": files}, f, indent=2)
+# The same logs in other containers (make_containers.py) keep their list.
+manifest_path = os.path.join(OUT, "manifest.json")
+containers = json.load(open(manifest_path)).get("containers", []) if os.path.exists(manifest_path) else []
+with open(manifest_path, "w") as f:
+    json.dump({"version": 1, "files": files, "containers": containers}, f, indent=2)
     f.write("\n")
 print(json.dumps([(f["file"], f["bytes"]) for f in files]))

@@ -3,6 +3,9 @@
 //! log replays over RTPS from the bridge into agent processes (plain, and a BICA role) to equal digests, and a log
 //! that does not match the manifest fails the check.
 //! `--out DIR` records the run as `DIR/run.mcap`, which both MCAP readers open and whose deltas rebuild the graph.
+//! The same log as a ROS 1 bag (bz2, lz4), ROS 1 MCAP or rosbag2 directory (sqlite3, mcap) replays to the same graph
+//! and counts; custom messages are decoded from their definitions (or carried opaque); a damaged bag or sqlite file
+//! is an error that says where, and `--recover` replays what is readable.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -160,7 +163,11 @@ fn datasets_verify_passes_and_catches_a_changed_file() {
     assert!(stdout.contains("husky_gps_imu_odom_robot_localization_test1.mcap     CHECKSUM MISMATCH"), "{stdout}");
     assert!(stdout.contains("sick_tim7xx_scan_10s.mcap                            ok"), "{stdout}");
     assert!(stdout.contains("euroc_v1_01_easy_cam0_1s.mcap                        MISSING"), "{stdout}");
-    assert!(String::from_utf8_lossy(&out.stderr).contains("3 of 4 files"), "{}", String::from_utf8_lossy(&out.stderr));
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(source.join("manifest.json")).unwrap()).unwrap();
+    let total = 4 + manifest["containers"].as_array().unwrap().len();
+    let expected = format!("{} of {total} files", total - 1);
+    assert!(String::from_utf8_lossy(&out.stderr).contains(&expected), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
 #[test]
@@ -241,4 +248,83 @@ fn replay_out_records_a_run_that_rebuilds_the_graph() {
     assert_eq!(applied, deltas);
     assert_eq!(replica.digest().to_string(), summary["digests"][0].as_str().unwrap());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `cortex replay --rate max --json` of a log: the summary.
+fn replay_json(log: &str, extra: &[&str]) -> serde_json::Value {
+    let out = cortex(&[&["replay", log, "--rate", "max", "--json"][..], extra].concat());
+    assert!(out.status.success(), "{log}: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).expect("JSON summary")
+}
+
+#[test]
+fn every_container_of_a_log_replays_to_the_same_graph() {
+    let reference = replay_json(&repo("datasets/logs/containers/husky_10s.mcap"), &[]);
+    assert_eq!(reference["container"], "mcap");
+    assert_eq!(reference["bridge"]["decoded"]["sensor_msgs/msg/Imu"], 301);
+    for (name, container) in [
+        ("husky_10s.bag", "ros1 bag"),
+        ("husky_10s_bz2.bag", "ros1 bag"),
+        ("husky_10s_lz4.bag", "ros1 bag"),
+        ("husky_10s_ros1.mcap", "mcap"),
+        ("husky_10s_sqlite3", "rosbag2 sqlite3"),
+        ("husky_10s_rosbag2_mcap", "rosbag2 mcap"),
+    ] {
+        let summary = replay_json(&repo(&format!("datasets/logs/containers/{name}")), &[]);
+        assert_eq!(summary["container"], container, "{name}");
+        assert_eq!(summary["digests_equal"], true, "{name}");
+        assert_eq!(summary["digests"][0], reference["digests"][0], "{name}: the same graph");
+        assert_eq!(summary["bridge"]["decoded"], reference["bridge"]["decoded"], "{name}");
+        assert_eq!(summary["deltas"], reference["deltas"], "{name}");
+    }
+}
+
+#[test]
+fn custom_messages_are_described_or_carried_opaque() {
+    let log = repo("datasets/logs/containers/custom_radar_diag.bag");
+    let summary = replay_json(&log, &[]);
+    assert_eq!(summary["bridge"]["described"]["acme_radar_msgs/msg/RadarScan"], 10);
+    assert_eq!(summary["bridge"]["described"]["diagnostic_msgs/msg/DiagnosticArray"], 10);
+    assert_eq!(summary["digests_equal"], true);
+    let summary = replay_json(&log, &["--opaque"]);
+    assert_eq!(summary["bridge"]["unknown"]["acme_radar_msgs/msg/RadarScan"], 10);
+    assert_eq!(summary["bridge"]["opaque"], 20);
+    let out = cortex(&["replay", &repo("datasets/logs/containers/custom_radar_diag_sqlite3"), "--rate", "max"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    let described =
+        text.lines().any(|line| line.starts_with("  described") && line.ends_with("10  acme_radar_msgs/msg/RadarScan"));
+    assert!(text.contains("(rosbag2 sqlite3, ") && described, "{text}");
+}
+
+#[test]
+fn damaged_bag_and_sqlite_are_errors_that_say_where_and_recover() {
+    let dir = std::env::temp_dir().join(format!("cortex-replay-damaged-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bag = std::fs::read(repo("datasets/logs/containers/husky_10s_lz4.bag")).unwrap();
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bag[..bag.len() / 2]).unwrap();
+    let out = cortex(&["replay", cut.to_str().unwrap(), "--rate", "max"]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("cut.mcap: ") && stderr.contains(" record at byte ") && stderr.contains("truncated"),
+        "{stderr}"
+    );
+    let summary = replay_json(cut.to_str().unwrap(), &["--recover"]);
+    assert_eq!(summary["container"], "ros1 bag", "detected from the content, not the name");
+    assert!(summary["messages"].as_u64().unwrap() > 0 && summary["damage"].is_string());
+    let db_dir = dir.join("bag");
+    std::fs::create_dir_all(&db_dir).unwrap();
+    let source = PathBuf::from(repo("datasets/logs/containers/husky_10s_sqlite3"));
+    std::fs::copy(source.join("metadata.yaml"), db_dir.join("metadata.yaml")).unwrap();
+    let mut db = std::fs::read(source.join("husky_10s_sqlite3.db3")).unwrap();
+    db[30 * 4096..31 * 4096].fill(0xA5);
+    std::fs::write(db_dir.join("husky_10s_sqlite3.db3"), &db).unwrap();
+    let out = cortex(&["replay", db_dir.to_str().unwrap(), "--rate", "max"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains(" of table `messages`: sqlite: database disk image is malformed"), "{stderr}");
+    let summary = replay_json(db_dir.to_str().unwrap(), &["--recover"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(summary["damage"].as_str().unwrap().contains(" of table `messages`"), "{summary}");
+    assert!(summary["messages"].as_u64().unwrap() > 100, "{summary}");
 }

@@ -64,22 +64,29 @@ window_ms = 250
     )
 }
 
-#[test]
-fn tiny_report_has_every_figure_and_section() {
-    let dir = scratch("tiny");
-    let (euroc, sick) =
-        (repo("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap"), repo("datasets/logs/sick_tim7xx_scan_10s.mcap"));
-    let set = tiny_set(&euroc, &sick);
+/// Runs `cortex report` on an experiment file `name` whose `quick` and `full` sets are both `set` (which starts with
+/// its `agents` line); returns the output directory and the command's output, which must have succeeded.
+fn run_report(name: &str, set: &str) -> (PathBuf, std::process::Output) {
+    let dir = scratch(name);
+    let agents = set.lines().next().unwrap();
     let config = format!(
-        "name = \"tiny\"\ndescription = \"test\"\n{}{}",
-        set.replace("\n[", "\n[quick.").replacen("agents = [2, 3]", "[quick]\nagents = [2, 3]", 1),
-        set.replace("\n[", "\n[full.").replacen("agents = [2, 3]", "[full]\nagents = [2, 3]", 1)
+        "name = \"{name}\"\ndescription = \"test\"\n{}{}",
+        set.replace("\n[", "\n[quick.").replacen(agents, &format!("[quick]\n{agents}"), 1),
+        set.replace("\n[", "\n[full.").replacen(agents, &format!("[full]\n{agents}"), 1)
     );
-    let config_path = dir.join("experiments/tiny.toml");
+    let config_path = dir.join(format!("experiments/{name}.toml"));
     std::fs::write(&config_path, config).unwrap();
     let out = dir.join("out");
     let output = cortex(&["report", "--config", config_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    (out, output)
+}
+
+#[test]
+fn tiny_report_has_every_figure_and_section() {
+    let (euroc, sick) =
+        (repo("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap"), repo("datasets/logs/sick_tim7xx_scan_10s.mcap"));
+    let (out, output) = run_report("tiny", &tiny_set(&euroc, &sick));
     assert!(String::from_utf8_lossy(&output.stdout).contains("report tiny (quick)"));
     // Not on a terminal, progress is one line per finished run.
     let stderr = String::from_utf8_lossy(&output.stderr);
@@ -184,7 +191,7 @@ fn tiny_report_has_every_figure_and_section() {
     assert_eq!(timeline["counters"]["runs"], steps.len());
     assert!(steps.windows(2).all(|w| w[0]["finish_ns"].as_u64() <= w[1]["start_ns"].as_u64()));
     assert!(timeline["overload_busy_steps"].as_u64().unwrap() > 0);
-    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(out.parent().unwrap());
 }
 
 #[test]
@@ -197,4 +204,43 @@ fn malformed_experiment_file_is_refused_naming_the_field() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("not a valid experiment file") && stderr.contains("speed"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn experiment_files_take_logs_in_any_container() {
+    let (bag, sqlite, ros1_mcap) = (
+        repo("datasets/logs/containers/husky_10s_bz2.bag"),
+        repo("datasets/logs/containers/husky_10s_sqlite3"),
+        repo("datasets/logs/containers/husky_10s_ros1.mcap"),
+    );
+    let set = format!(
+        r#"agents = [2]
+seeds = [3]
+logs = [{{ path = "{bag}", rate = "max" }}, {{ path = "{sqlite}", rate = "max" }}]
+[payload]
+sizes = [16]
+rate_hz = 200
+count = 3
+agents = 2
+transport = "inproc"
+[faults]
+agents = 2
+transports = ["inproc"]
+log = {{ path = "{ros1_mcap}", rate = "max" }}
+variants = [{{ label = "no faults" }}]
+[partition]
+agents = 2
+partition_ms = 50
+rate_hz = 100
+announce_ms = 50
+repetitions = 1
+transports = ["inproc"]
+"#
+    );
+    let (out, _) = run_report("containers", &set);
+    let results: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    let datasets = results["provenance"]["datasets"].as_array().unwrap();
+    assert_eq!(datasets.len(), 3, "{datasets:?}");
+    assert!(datasets.iter().all(|d| d["sha256"] == d["manifest_sha256"]), "{datasets:?}");
+    let _ = std::fs::remove_dir_all(out.parent().unwrap());
 }

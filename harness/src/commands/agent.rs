@@ -157,7 +157,8 @@ pub enum Role {
     Attention,
     /// Writes the bundled EuRoC frames into the camera node (inserted if missing), each frame 5 times in a row.
     FixtureCamera,
-    /// Replays a ROS 2 MCAP log (`--log`) into the graph through the replay bridge: a node per topic, TF as RT edges.
+    /// Replays a robot log (`--log`: MCAP, ROS 1 bag or rosbag2 directory) into the graph through the replay bridge:
+    /// a node per topic, TF as RT edges.
     Bridge,
 }
 
@@ -240,7 +241,10 @@ pub fn run(args: AgentArgs) -> Result<()> {
             if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {
                 bail!("agent {} got no graph in time to start the bridge", args.id);
             }
-            let path = args.log.clone().context("the bridge role needs --log FILE.mcap")?;
+            let path = args
+                .log
+                .clone()
+                .context("the bridge role needs --log LOG (an MCAP file, a ROS 1 bag or a rosbag2 directory)")?;
             let log = replay::Log::open(&path, replay::ReadOptions::default())
                 .with_context(|| format!("cannot replay {}", path.display()))?;
             let (agent, stop, rate, loops) = (Arc::clone(&agent), Arc::clone(&stop), args.rate, args.loops);

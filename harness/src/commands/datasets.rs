@@ -1,6 +1,7 @@
 //! `cortex datasets verify`: check the bundled logs against their manifest.
 //!
-//! `datasets/logs/manifest.json` lists every log with its size and SHA-256 (and its source, licence and topics).
+//! `datasets/logs/manifest.json` lists every log with its size and SHA-256 (and its source, licence and topics), and
+//! under `containers` every file of the same logs in other containers (with the container and encoding).
 //! `verify` hashes each file and reports, per file, `ok`, a size or checksum mismatch, or a missing file; any
 //! failure makes the command fail (exit code 1), so CI notices a damaged or replaced log.
 
@@ -38,6 +39,9 @@ enum DatasetsCommand {
 #[derive(Debug, Deserialize)]
 struct Manifest {
     files: Vec<Entry>,
+    /// The same logs in other containers (`containers/…`: ROS 1 bags, ROS 1 MCAP, rosbag2 directories' files).
+    #[serde(default)]
+    containers: Vec<Entry>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -68,7 +72,8 @@ pub fn run(args: DatasetsArgs) -> anyhow::Result<()> {
         .with_context(|| format!("cannot read the manifest {}", manifest_path.display()))?;
     let manifest: Manifest =
         serde_json::from_str(&text).with_context(|| format!("{}: not a valid manifest", manifest_path.display()))?;
-    let checks: Vec<Check> = manifest.files.iter().map(|entry| check(&dir, entry)).collect();
+    let checks: Vec<Check> =
+        manifest.files.iter().chain(&manifest.containers).map(|entry| check(&dir, entry)).collect();
     let failed = checks.iter().filter(|check| !check.ok).count();
     if json {
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "dir": dir, "files": checks }))?);

@@ -1,8 +1,10 @@
-//! `cortex replay`: replay a ROS 2 MCAP log into the graph through a bridge agent and check that every agent ends
-//! with the same graph.
+//! `cortex replay`: replay a robot log into the graph through a bridge agent and check that every agent ends with the
+//! same graph.
 //!
-//! The log is memory-mapped and read with `replay::log` (damage is an error that says where, or, with
-//! `--recover`, the end of what is replayed); messages are paced at the recorded timing divided by `--rate` (or as
+//! The log — an MCAP file (ROS 2 `cdr` or ROS 1 `ros1` messages), a ROS 1 bag (v2.0) or a rosbag2 directory (sqlite3
+//! or MCAP storage), detected from its content — is read with `replay::log` (damage is an error that says where, or,
+//! with `--recover`, the end of what is replayed); messages of types the bridge has no decoder for are decoded from
+//! the definitions the log carries (`--opaque` carries them as raw bytes instead); messages are paced at the recorded timing divided by `--rate` (or as
 //! fast as possible with `--rate max`) and looped `--loop` times; the bridge writes them into its replica and its
 //! deltas go to the other agents. With `--transport inproc` the agents are replicas in this process joined by the
 //! seeded in-memory delivery of `replay::inproc`. With `--transport rtps` the bridge is an agent in this process
@@ -46,7 +48,8 @@ pub enum Transport {
 /// defaults shown.
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
-    /// A ROS 2 MCAP file (`cdr` messages, `ros2msg` schemas); may come from `--config` instead.
+    /// A log: an MCAP file (`cdr` or `ros1` messages), a ROS 1 bag (v2.0) or a rosbag2 directory (sqlite3 or mcap
+    /// storage), detected from its content; may come from `--config` instead.
     file: Option<PathBuf>,
     /// A replay configuration (TOML): any of `log`, `agents`, `transport`, `rate`, `loops`, `topics`, `roles`,
     /// `faults`, `seed`, `window`, `domain`, `settle_ms`; relative paths against the parent of the file's
@@ -71,7 +74,8 @@ pub struct ReplayArgs {
     /// Replay what is readable before damage in the file instead of failing.
     #[arg(long)]
     recover: bool,
-    /// Carry messages of unknown types as opaque byte attributes instead of skipping them.
+    /// Carry messages of types the bridge has no decoder for as opaque byte attributes, instead of decoding them
+    /// from the definitions the log carries (or skipping them when it carries none).
     #[arg(long)]
     opaque: bool,
     /// Seed of the in-process delivery order [default: 1].
@@ -182,7 +186,9 @@ fn resolve(args: ReplayArgs) -> anyhow::Result<Resolved> {
     let log = match (args.file, file.log) {
         (Some(path), _) => path,
         (None, Some(path)) => root.join(path),
-        (None, None) => bail!("no log to replay: give FILE.mcap, or `log` in --config"),
+        (None, None) => {
+            bail!("no log to replay: give a log (FILE.mcap, FILE.bag, a rosbag2 directory), or `log` in --config")
+        }
     };
     Ok(Resolved {
         file: log,
@@ -209,6 +215,8 @@ fn resolve(args: ReplayArgs) -> anyhow::Result<Resolved> {
 #[derive(Debug, Serialize)]
 struct Summary {
     file: String,
+    /// The log's container (`mcap`, `ros1 bag`, `rosbag2 sqlite3`, `rosbag2 mcap`).
+    container: &'static str,
     transport: &'static str,
     agents: u32,
     rate: String,
@@ -218,6 +226,10 @@ struct Summary {
     unread_bytes: u64,
     messages: u64,
     payload_bytes: u64,
+    /// Seconds spent reading the log (mapping, decompressing, indexing, sorting) before the replay.
+    read_seconds: f64,
+    /// Payload MB per second of reading and replaying together.
+    read_megabytes_per_second: f64,
     seconds: f64,
     messages_per_second: f64,
     megabytes_per_second: f64,
@@ -276,7 +288,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     let options = ReadOptions { recover: args.recover, ..ReadOptions::default() };
+    let reading = Instant::now();
     let log = Log::open(&args.file, options).context("cannot replay")?;
+    let read_seconds = reading.elapsed().as_secs_f64();
     if let Some(damage) = &log.damage {
         eprintln!(
             "warning: {}: {damage}; replaying the {} messages read before it ({} bytes unread)",
@@ -286,7 +300,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     if args.transport == Transport::Rtps {
-        return run_rtps(&args, &log);
+        return run_rtps(&args, &log, read_seconds);
     }
     let dictionary = replay::bridge::dictionary().context("bridge dictionary")?;
     let mut replica = Replica::with_dictionary(ReplicaId(1), dictionary.clone());
@@ -359,23 +373,24 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         digests: digest_strings,
         digests_equal,
         recording,
-        ..summary(&args, &log, "inproc", &driven, seconds, bridge.stats().clone())
+        ..summary(&args, &log, "inproc", &driven, [read_seconds, seconds], bridge.stats().clone())
     };
     finish(&args, &summary)
 }
 
 /// The part of a summary both transports fill alike; what differs (bytes, deliveries, digests, agents,
-/// recording) is set by the caller.
+/// recording) is set by the caller. `[read_seconds, seconds]`: reading the log, and replaying it.
 fn summary(
     args: &Resolved,
     log: &Log,
     transport: &'static str,
     drive: &inproc::DriveStats,
-    seconds: f64,
+    [read_seconds, seconds]: [f64; 2],
     bridge: BridgeStats,
 ) -> Summary {
     Summary {
         file: args.file.display().to_string(),
+        container: log.container.name(),
         transport,
         agents: args.agents,
         rate: rate_text(args.rate),
@@ -385,6 +400,8 @@ fn summary(
         unread_bytes: log.unread_bytes,
         messages: drive.messages,
         payload_bytes: drive.bytes,
+        read_seconds,
+        read_megabytes_per_second: drive.bytes as f64 / 1e6 / (read_seconds + seconds).max(1e-9),
         seconds,
         messages_per_second: drive.messages as f64 / seconds.max(1e-9),
         megabytes_per_second: drive.bytes as f64 / 1e6 / seconds.max(1e-9),
@@ -422,7 +439,7 @@ fn finish(args: &Resolved, summary: &Summary) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
+fn run_rtps(args: &Resolved, log: &Log, read_seconds: f64) -> anyhow::Result<()> {
     let config = super::replay_rtps::RtpsReplay {
         agents: args.agents,
         domain: args.domain,
@@ -454,7 +471,14 @@ fn run_rtps(args: &Resolved, log: &Log) -> anyhow::Result<()> {
             latency: None,
             convergence: None,
         }),
-        ..summary(args, log, "rtps", &outcome.played.drive, outcome.seconds, outcome.played.bridge.clone())
+        ..summary(
+            args,
+            log,
+            "rtps",
+            &outcome.played.drive,
+            [read_seconds, outcome.seconds],
+            outcome.played.bridge.clone(),
+        )
     };
     finish(args, &summary)
 }
@@ -463,8 +487,8 @@ fn text(s: &Summary) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "replay {} ({} bytes) over {} with {} agents, rate {}, {} loop(s)",
-        s.file, s.file_bytes, s.transport, s.agents, s.rate, s.loops
+        "replay {} ({}, {} bytes) over {} with {} agents, rate {}, {} loop(s)",
+        s.file, s.container, s.file_bytes, s.transport, s.agents, s.rate, s.loops
     );
     if let Some(faults) = &s.faults {
         let _ = writeln!(out, "  faults        {faults} (on what each agent process receives)");
@@ -477,12 +501,18 @@ fn text(s: &Summary) -> String {
         "  messages      {} in {:.3} s: {:.0} messages/s, {:.1} MB/s of payload ({} bytes)",
         s.messages, s.seconds, s.messages_per_second, s.megabytes_per_second, s.payload_bytes
     );
+    let _ = writeln!(
+        out,
+        "  read          in {:.3} s before the replay: {:.1} MB/s of payload read and replayed",
+        s.read_seconds, s.read_megabytes_per_second
+    );
     let table = |out: &mut String, title: &str, rows: &BTreeMap<String, u64>| {
         for (name, count) in rows {
             let _ = writeln!(out, "  {title:<13} {count:>8}  {name}");
         }
     };
     table(&mut out, "decoded", &s.bridge.decoded);
+    table(&mut out, "described", &s.bridge.described);
     table(&mut out, "unknown", &s.bridge.unknown);
     let b = &s.bridge;
     let _ = writeln!(

@@ -75,30 +75,59 @@ pub struct DatasetChecksum {
 }
 
 impl DatasetChecksum {
-    /// Reads and hashes `path`; looks it up in `manifest.json` in the same directory.
+    /// Reads and hashes `path`, and looks it up in the `manifest.json` of its directory or of the directory above
+    /// (`datasets/logs/containers/…` is listed in `datasets/logs/manifest.json`). A directory (a rosbag2 bag) is
+    /// hashed as the SHA-256 of its files' `NAME SHA256` lines in name order, and compared with the same hash of
+    /// the manifest's entries for its files.
     ///
     /// # Errors
-    /// The file cannot be read.
+    /// The file (or a file of the directory) cannot be read.
     pub fn of(path: &Path) -> std::io::Result<DatasetChecksum> {
-        let data = std::fs::read(path)?;
-        let sha256 = hex(&Sha256::digest(&data));
-        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let manifest_sha256 = path
-            .parent()
-            .and_then(|dir| std::fs::read_to_string(dir.join("manifest.json")).ok())
-            .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
-            .and_then(|manifest| {
-                manifest["files"].as_array()?.iter().find(|f| f["file"] == name.as_str())?["sha256"]
-                    .as_str()
-                    .map(str::to_owned)
-            });
-        Ok(DatasetChecksum { file: path.display().to_string(), bytes: data.len() as u64, sha256, manifest_sha256 })
+        let (bytes, sha256) = if path.is_dir() {
+            let mut lines = String::new();
+            let mut bytes = 0;
+            let mut names: Vec<_> = std::fs::read_dir(path)?.collect::<Result<Vec<_>, _>>()?;
+            names.sort_by_key(std::fs::DirEntry::file_name);
+            for entry in names.iter().filter(|entry| entry.path().is_file()) {
+                let data = std::fs::read(entry.path())?;
+                bytes += data.len() as u64;
+                lines.push_str(&format!("{} {}\n", entry.file_name().to_string_lossy(), hex(&Sha256::digest(&data))));
+            }
+            (bytes, hex(&Sha256::digest(lines.as_bytes())))
+        } else {
+            let data = std::fs::read(path)?;
+            (data.len() as u64, hex(&Sha256::digest(&data)))
+        };
+        let manifest_sha256 = path.ancestors().skip(1).take(2).find_map(|dir| manifest_sha256(dir, path));
+        Ok(DatasetChecksum { file: path.display().to_string(), bytes, sha256, manifest_sha256 })
     }
 
     /// Whether the file matches its manifest (`None` if the manifest does not list it).
     pub fn matches_manifest(&self) -> Option<bool> {
         self.manifest_sha256.as_ref().map(|m| *m == self.sha256)
     }
+}
+
+/// What `dir/manifest.json` states for `path` (a file, or a directory's files combined as [`DatasetChecksum::of`]
+/// does), looking in its `files` and `containers` lists.
+fn manifest_sha256(dir: &Path, path: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join("manifest.json")).ok()?;
+    let manifest: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let relative = path.strip_prefix(dir).ok()?.to_string_lossy().replace('\\', "/");
+    let entries: Vec<&serde_json::Value> =
+        ["files", "containers"].iter().filter_map(|list| manifest[list].as_array()).flatten().collect();
+    let sha = |entry: &serde_json::Value| entry["sha256"].as_str().map(str::to_owned);
+    if !path.is_dir() {
+        return entries.iter().find(|entry| entry["file"] == relative.as_str()).and_then(|entry| sha(entry));
+    }
+    let prefix = format!("{relative}/");
+    let mut members: Vec<(String, String)> = entries
+        .iter()
+        .filter_map(|entry| Some((entry["file"].as_str()?.strip_prefix(&prefix)?.to_owned(), sha(entry)?)))
+        .collect();
+    members.sort();
+    let lines: String = members.iter().map(|(name, sha256)| format!("{name} {sha256}\n")).collect();
+    (!members.is_empty()).then(|| hex(&Sha256::digest(lines.as_bytes())))
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -204,6 +233,15 @@ mod tests {
         let checksum = DatasetChecksum::of(&path).unwrap();
         assert_eq!(checksum.sha256.len(), 64);
         assert_eq!(checksum.matches_manifest(), Some(true), "{checksum:?}");
+    }
+
+    #[test]
+    fn logs_in_other_containers_match_the_manifest_above_them() {
+        let containers = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../datasets/logs/containers");
+        for name in ["husky_10s_bz2.bag", "husky_10s_sqlite3", "custom_radar_diag_rosbag2_mcap"] {
+            let checksum = DatasetChecksum::of(&containers.join(name)).unwrap();
+            assert_eq!(checksum.matches_manifest(), Some(true), "{checksum:?}");
+        }
     }
 
     #[test]

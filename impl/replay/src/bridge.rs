@@ -17,11 +17,18 @@
 //!   that moves to another parent loses its old RT edge first; a transform that would close an RT cycle is refused
 //!   and counted.
 //!
-//! Messages of unknown types (or of a non-CDR encoding) are counted, and carried as an opaque `opaque_payload`
-//! attribute on a `topic` node if [`BridgeOptions::opaque`] is set. Malformed payloads and refused graph operations
-//! are counted per topic, with the first few messages kept; they never stop a replay and never panic.
+//! Known types are decoded from CDR (ROS 2) or ROS 1 serialization alike ([`ros2::decode_as`]), under either name
+//! a type goes by (`sensor_msgs/LaserScan`, `sensor_msgs/msg/LaserScan`). A message of another type whose log carries
+//! its definition (`ros1msg`/`ros2msg`) is decoded from it ([`generic`]) into attributes of a `topic` node named after
+//! the topic (`RadarScan.targets.0.range`, …; its header's frame and stamp as for the known types), counted in
+//! [`BridgeStats::described`]. Messages of other types (no definition, another encoding), and with
+//! [`BridgeOptions::opaque`] every message of a type the bridge has no decoder for, are counted as unknown, and carried
+//! as an opaque `opaque_payload` attribute on a `topic` node if [`BridgeOptions::opaque`] is set. Malformed payloads,
+//! definitions that do not parse and refused graph operations are counted per topic, with the first few messages
+//! kept; they never stop a replay and never panic.
 //!
-//! Replicas that receive the bridge's deltas must use the same [`dictionary`].
+//! Replicas that receive the bridge's deltas must use the same [`dictionary`]: it accepts attribute names it does not
+//! know (a described message's fields), each taking the type it is first seen with.
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
@@ -30,8 +37,10 @@ use bytes::Bytes;
 use dsr::{Delta, Dictionary, DictionaryError, EdgeKey, NewNode, NodeId, OpError, Replica, Value, attrs};
 use nalgebra::{Quaternion, UnitQuaternion};
 
-use crate::log::Message;
-use crate::ros2::{self, Header, Ros2Message};
+use crate::generic::{self, GenericError};
+use crate::log::{Message, Schema};
+use crate::msgdef::{DefinitionError, Definitions, ros2_type_name};
+use crate::ros2::{self, Encoding, Header, Ros2Message};
 
 /// Node type of opaque topics.
 pub const OPAQUE_NODE_TYPE: &str = "topic";
@@ -44,13 +53,14 @@ pub const FRAME_NODE_TYPE: &str = "transform";
 /// How many error messages [`BridgeStats::first_errors`] keeps.
 pub const KEPT_ERRORS: usize = 10;
 
-/// The dictionary of the bridge and of every replica that receives its deltas: the built-in one plus the opaque
-/// topic node type and its two attributes.
+/// The dictionary of the bridge and of every replica that receives its deltas: the built-in one, accepting unknown
+/// attribute names (those of messages decoded from their definitions), plus the opaque topic node type and its two
+/// attributes.
 ///
 /// # Errors
 /// Only if the built-in dictionary already gives these names other types.
 pub fn dictionary() -> Result<Dictionary, DictionaryError> {
-    let mut dictionary = Dictionary::builtin();
+    let mut dictionary = Dictionary::permissive();
     dictionary.declare_node_type(OPAQUE_NODE_TYPE)?;
     dictionary.declare_attr(OPAQUE_PAYLOAD, dsr::ValueType::Bytes)?;
     dictionary.declare_attr(OPAQUE_TYPE, dsr::ValueType::String)?;
@@ -62,7 +72,8 @@ pub fn dictionary() -> Result<Dictionary, DictionaryError> {
 pub struct BridgeOptions {
     /// Only these topics (all if `None`); other messages are counted as filtered.
     pub topics: Option<Vec<String>>,
-    /// Carry messages of unknown types as opaque bytes instead of skipping them.
+    /// Carry messages of types without a decoder as opaque bytes, instead of decoding them from the definitions their
+    /// log carries (or skipping them when it carries none).
     pub opaque: bool,
 }
 
@@ -75,7 +86,12 @@ pub struct BridgeStats {
     pub bytes: u64,
     /// Messages decoded and written, by type.
     pub decoded: BTreeMap<String, u64>,
-    /// Messages of unknown types (carried or skipped), by type (with the encoding when it is not `cdr`).
+    /// Messages of types without a decoder, decoded from the definitions their log carries, by type (ROS 2 name).
+    pub described: BTreeMap<String, u64>,
+    /// Values of described messages read but not kept (over the attribute or unrolling limits of [`generic::Limits`]).
+    pub described_dropped: u64,
+    /// Messages of unknown types (carried or skipped), by type (ROS 2 name; with the encoding when it is neither
+    /// `cdr` nor `ros1`).
     pub unknown: BTreeMap<String, u64>,
     /// Unknown messages carried as opaque bytes.
     pub opaque: u64,
@@ -105,7 +121,14 @@ enum Failure {
     Decode(#[from] ros2::DecodeError),
     #[error("graph refused an operation: {0}")]
     Graph(#[from] OpError),
+    #[error("{0}")]
+    Definition(#[from] DefinitionError),
+    #[error("{0}")]
+    Described(#[from] GenericError),
 }
+
+/// A topic's parsed definitions, kept with the schema they were parsed from.
+type CachedDefinitions = (Arc<Schema>, Result<Arc<Definitions>, DefinitionError>);
 
 /// Maps messages to graph operations; holds the topic and frame nodes it created.
 #[derive(Debug, Default)]
@@ -114,6 +137,7 @@ pub struct Bridge {
     topics: HashMap<String, NodeId>,
     frames: HashMap<String, NodeId>,
     sequences: HashMap<String, u64>,
+    definitions: HashMap<String, CachedDefinitions>,
     stats: BridgeStats,
 }
 
@@ -173,32 +197,22 @@ impl Bridge {
     ) -> Result<(), Failure> {
         let channel = &message.channel;
         let type_name = channel.type_name();
-        let decoded = if channel.message_encoding == "cdr" { ros2::decode(type_name, &message.data)? } else { None };
+        let encoding = Encoding::from_message_encoding(&channel.message_encoding);
+        let decoded = match encoding {
+            Some(encoding) => ros2::decode_as(type_name, encoding, &message.data)?,
+            None => None,
+        };
         let Some(decoded) = decoded else {
-            let key = if channel.message_encoding == "cdr" {
-                type_name.to_owned()
-            } else {
-                format!("{type_name} ({})", channel.message_encoding)
-            };
-            *self.stats.unknown.entry(key).or_default() += 1;
-            if self.options.opaque {
-                let node = self.topic_node_for(replica, now, &channel.topic, OPAQUE_NODE_TYPE, "", deltas)?;
-                let values = vec![
-                    (OPAQUE_PAYLOAD, Value::Bytes(message.data.clone())),
-                    (OPAQUE_TYPE, Value::String(Arc::from(type_name))),
-                    (attrs::STAMP_NS.name(), Value::U64(message.log_time.saturating_add(shift_ns))),
-                ];
-                deltas.push(replica.set_attrs(now, node, values)?);
-                self.stats.opaque += 1;
+            if let Some(encoding) = encoding
+                && !self.options.opaque
+                && let Some(definitions) = self.definitions_for(message)?
+            {
+                return self.write_described(replica, now, message, shift_ns, encoding, &definitions, deltas);
             }
-            return Ok(());
+            return self.write_unknown(replica, now, message, shift_ns, deltas);
         };
         let canonical = ros2::known_type(type_name).unwrap_or("unknown");
-        let sequence = {
-            let counter = self.sequences.entry(channel.topic.clone()).or_default();
-            *counter += 1;
-            *counter - 1
-        };
+        let sequence = self.next_sequence(&channel.topic);
         let stamp = |header: &Header| Value::U64(header.stamp_ns().saturating_add(shift_ns));
         let mut values: Vec<(&str, Value)> = Vec::with_capacity(8);
         let (node_type, header) = match &decoded {
@@ -290,6 +304,91 @@ impl Bridge {
         deltas.push(replica.set_attrs(now, node, values)?);
         *self.stats.decoded.entry(canonical.to_owned()).or_default() += 1;
         Ok(())
+    }
+
+    /// A message of an unknown type: counted, and carried as opaque bytes if asked.
+    fn write_unknown(
+        &mut self,
+        replica: &mut Replica,
+        now: u64,
+        message: &Message,
+        shift_ns: u64,
+        deltas: &mut Vec<Arc<Delta>>,
+    ) -> Result<(), Failure> {
+        let channel = &message.channel;
+        let type_name = channel.type_name();
+        let key = match Encoding::from_message_encoding(&channel.message_encoding) {
+            Some(_) => ros2_type_name(type_name),
+            None => format!("{type_name} ({})", channel.message_encoding),
+        };
+        *self.stats.unknown.entry(key).or_default() += 1;
+        if self.options.opaque {
+            let node = self.topic_node_for(replica, now, &channel.topic, OPAQUE_NODE_TYPE, "", deltas)?;
+            let values = vec![
+                (OPAQUE_PAYLOAD, Value::Bytes(message.data.clone())),
+                (OPAQUE_TYPE, Value::String(Arc::from(type_name))),
+                (attrs::STAMP_NS.name(), Value::U64(message.log_time.saturating_add(shift_ns))),
+            ];
+            deltas.push(replica.set_attrs(now, node, values)?);
+            self.stats.opaque += 1;
+        }
+        Ok(())
+    }
+
+    /// The parsed definitions of a message's type, if its log carries them (`None` if it does not); parsed once per
+    /// topic and schema.
+    fn definitions_for(&mut self, message: &Message) -> Result<Option<Arc<Definitions>>, Failure> {
+        let Some(schema) = &message.channel.schema else { return Ok(None) };
+        if !generic::is_msg_definition(&schema.encoding) || schema.data.is_empty() {
+            return Ok(None);
+        }
+        let topic = &message.channel.topic;
+        let cached = self.definitions.get(topic).filter(|(parsed_from, _)| Arc::ptr_eq(parsed_from, schema));
+        let parsed = match cached {
+            Some((_, parsed)) => parsed.clone(),
+            None => {
+                let text = String::from_utf8_lossy(&schema.data);
+                let parsed = Definitions::parse(&schema.name, &text).map(Arc::new);
+                self.definitions.insert(topic.clone(), (schema.clone(), parsed.clone()));
+                parsed
+            }
+        };
+        Ok(Some(parsed?))
+    }
+
+    /// A message decoded from its definition: its attributes on the topic's node, under its header's frame.
+    #[allow(clippy::too_many_arguments)]
+    fn write_described(
+        &mut self,
+        replica: &mut Replica,
+        now: u64,
+        message: &Message,
+        shift_ns: u64,
+        encoding: Encoding,
+        definitions: &Definitions,
+        deltas: &mut Vec<Arc<Delta>>,
+    ) -> Result<(), Failure> {
+        let decoded = generic::decode(definitions, encoding, &message.data, generic::Limits::default())?;
+        let topic = &message.channel.topic;
+        let sequence = self.next_sequence(topic);
+        let stamp_ns = decoded.stamp_ns.unwrap_or(message.log_time).saturating_add(shift_ns);
+        let frame = decoded.frame_id.as_deref().unwrap_or("");
+        let node = self.topic_node_for(replica, now, topic, OPAQUE_NODE_TYPE, frame, deltas)?;
+        let mut values: Vec<(&str, Value)> = Vec::with_capacity(decoded.values.len() + 2);
+        values.extend(decoded.values.iter().map(|(name, value)| (name.as_str(), value.clone())));
+        values.push((attrs::STAMP_NS.name(), Value::U64(stamp_ns)));
+        values.push((attrs::SEQUENCE.name(), Value::U64(sequence)));
+        deltas.push(replica.set_attrs(now, node, values)?);
+        *self.stats.described.entry(ros2_type_name(definitions.root())).or_default() += 1;
+        self.stats.described_dropped += decoded.dropped;
+        Ok(())
+    }
+
+    /// The index of the next message on `topic`.
+    fn next_sequence(&mut self, topic: &str) -> u64 {
+        let counter = self.sequences.entry(topic.to_owned()).or_default();
+        *counter += 1;
+        *counter - 1
     }
 
     /// The node of `topic`, created (under its frame, if any) on first use.

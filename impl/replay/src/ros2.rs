@@ -1,10 +1,14 @@
-//! Decoders for the common ROS 2 message types, from the CDR bytes of an MCAP message.
+//! Decoders for the common ROS message types, from the CDR bytes of a ROS 2 message or the serialized bytes of a
+//! ROS 1 message.
 //!
 //! A ROS 2 payload is a 4-byte encapsulation header (`00 01` little-endian CDR, `00 00` big-endian) followed by
 //! the message's fields in declaration order, each primitive aligned to its size counted from the end of the
-//! header; strings and sequences carry a `u32` length (strings include their NUL). The layouts below follow the
-//! `.msg` definitions of `std_msgs`, `sensor_msgs`, `geometry_msgs`, `nav_msgs` and `tf2_msgs`, matched by the
-//! schema name of the channel (`sensor_msgs/msg/Image`, or the ROS 1 style `sensor_msgs/Image`).
+//! header; strings and sequences carry a `u32` length (strings include their NUL). A ROS 1 payload is the same fields
+//! little-endian with no header, no alignment and no NUL; its `std_msgs/Header` starts with a `u32 seq` (read and
+//! ignored) and its `time` is two `u32`s. The layouts below follow the `.msg` definitions of `std_msgs`,
+//! `sensor_msgs`, `geometry_msgs`, `nav_msgs` and `tf2_msgs`, which have the same fields in ROS 1 and ROS 2, matched by
+//! the schema name of the channel under both names a type goes by (`sensor_msgs/msg/Image`, or the ROS 1 style
+//! `sensor_msgs/Image`).
 //!
 //! Byte arrays (image pixels, point cloud data) are returned as [`Bytes`] views of the message's buffer, so they
 //! are not copied; numeric arrays are converted to native values (one copy). Every length is checked against the
@@ -419,13 +423,42 @@ pub fn known_type(schema_name: &str) -> Option<&'static str> {
     })
 }
 
+/// How a message's bytes are serialized.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Encoding {
+    /// ROS 2: CDR behind a 4-byte encapsulation header (MCAP message encoding `cdr`).
+    Cdr,
+    /// ROS 1 serialization (MCAP message encoding `ros1`, and every ROS 1 bag).
+    Ros1,
+}
+
+impl Encoding {
+    /// The encoding an MCAP channel (or a rosbag2 topic's serialization format) names, if it is one of these.
+    pub fn from_message_encoding(name: &str) -> Option<Encoding> {
+        match name {
+            "cdr" => Some(Encoding::Cdr),
+            "ros1" => Some(Encoding::Ros1),
+            _ => None,
+        }
+    }
+}
+
 /// Decodes a CDR payload whose channel declares `schema_name`; `Ok(None)` for a type this module does not know.
 ///
 /// # Errors
 /// [`DecodeError`] if the payload does not decode as that type.
 pub fn decode(schema_name: &str, data: &Bytes) -> Result<Option<Ros2Message>, DecodeError> {
+    decode_as(schema_name, Encoding::Cdr, data)
+}
+
+/// Decodes a payload of `encoding` whose channel declares `schema_name`; `Ok(None)` for a type this module does not
+/// know.
+///
+/// # Errors
+/// [`DecodeError`] if the payload does not decode as that type.
+pub fn decode_as(schema_name: &str, encoding: Encoding, data: &Bytes) -> Result<Option<Ros2Message>, DecodeError> {
     let Some(type_name) = known_type(schema_name) else { return Ok(None) };
-    let mut cdr = Cdr::new(type_name, data)?;
+    let mut cdr = Wire::new(type_name, encoding, data)?;
     let message = match type_name {
         "sensor_msgs/msg/Image" => {
             let header = cdr.header()?;
@@ -551,20 +584,24 @@ pub fn decode(schema_name: &str, data: &Bytes) -> Result<Option<Ros2Message>, De
     Ok(Some(message))
 }
 
-/// A CDR reader over one payload.
-struct Cdr<'a> {
+/// A reader over one payload, CDR or ROS 1: the primitives both share, with CDR's alignment and byte order.
+pub(crate) struct Wire<'a> {
     type_name: &'static str,
     data: &'a Bytes,
     pos: usize,
     little: bool,
+    encoding: Encoding,
 }
 
 /// Size of the encapsulation header; alignment counts from its end.
 const ENCAPSULATION: usize = 4;
 
-impl<'a> Cdr<'a> {
-    fn new(type_name: &'static str, data: &'a Bytes) -> Result<Self, DecodeError> {
-        let mut cdr = Cdr { type_name, data, pos: 0, little: true };
+impl<'a> Wire<'a> {
+    pub(crate) fn new(type_name: &'static str, encoding: Encoding, data: &'a Bytes) -> Result<Self, DecodeError> {
+        let mut cdr = Wire { type_name, data, pos: 0, little: true, encoding };
+        if encoding == Encoding::Ros1 {
+            return Ok(cdr);
+        }
         if data.len() < ENCAPSULATION {
             return Err(
                 cdr.error("encapsulation", format!("payload of {} bytes has no encapsulation header", data.len()))
@@ -582,16 +619,29 @@ impl<'a> Cdr<'a> {
         Ok(cdr)
     }
 
-    fn error(&self, field: &'static str, what: String) -> DecodeError {
+    pub(crate) fn error(&self, field: &'static str, what: String) -> DecodeError {
         DecodeError { type_name: self.type_name, field, offset: self.pos, what }
     }
 
-    fn align(&mut self, size: usize) {
+    /// Byte offset in the payload.
+    pub(crate) fn pos(&self) -> usize {
+        self.pos
+    }
+
+    /// Bytes left after the current position.
+    pub(crate) fn left(&self) -> usize {
+        self.data.len().saturating_sub(self.pos)
+    }
+
+    pub(crate) fn align(&mut self, size: usize) {
+        if self.encoding == Encoding::Ros1 {
+            return;
+        }
         let relative = self.pos - ENCAPSULATION;
         self.pos = ENCAPSULATION + relative.div_ceil(size) * size;
     }
 
-    fn take(&mut self, field: &'static str, n: usize) -> Result<&'a [u8], DecodeError> {
+    pub(crate) fn take(&mut self, field: &'static str, n: usize) -> Result<&'a [u8], DecodeError> {
         let left = self.data.len().saturating_sub(self.pos);
         if n > left {
             return Err(self.error(field, format!("needs {n} bytes, {left} left")));
@@ -602,7 +652,7 @@ impl<'a> Cdr<'a> {
         Ok(out)
     }
 
-    fn primitive<const N: usize>(&mut self, field: &'static str) -> Result<[u8; N], DecodeError> {
+    pub(crate) fn primitive<const N: usize>(&mut self, field: &'static str) -> Result<[u8; N], DecodeError> {
         self.align(N);
         let mut out = [0u8; N];
         out.copy_from_slice(self.take(field, N)?);
@@ -612,32 +662,32 @@ impl<'a> Cdr<'a> {
         Ok(out)
     }
 
-    fn u8(&mut self, field: &'static str) -> Result<u8, DecodeError> {
+    pub(crate) fn u8(&mut self, field: &'static str) -> Result<u8, DecodeError> {
         Ok(self.primitive::<1>(field)?[0])
     }
 
-    fn u16(&mut self, field: &'static str) -> Result<u16, DecodeError> {
+    pub(crate) fn u16(&mut self, field: &'static str) -> Result<u16, DecodeError> {
         Ok(u16::from_le_bytes(self.primitive(field)?))
     }
 
-    fn u32(&mut self, field: &'static str) -> Result<u32, DecodeError> {
+    pub(crate) fn u32(&mut self, field: &'static str) -> Result<u32, DecodeError> {
         Ok(u32::from_le_bytes(self.primitive(field)?))
     }
 
-    fn i32(&mut self, field: &'static str) -> Result<i32, DecodeError> {
+    pub(crate) fn i32(&mut self, field: &'static str) -> Result<i32, DecodeError> {
         Ok(i32::from_le_bytes(self.primitive(field)?))
     }
 
-    fn f32(&mut self, field: &'static str) -> Result<f32, DecodeError> {
+    pub(crate) fn f32(&mut self, field: &'static str) -> Result<f32, DecodeError> {
         Ok(f32::from_le_bytes(self.primitive(field)?))
     }
 
-    fn f64(&mut self, field: &'static str) -> Result<f64, DecodeError> {
+    pub(crate) fn f64(&mut self, field: &'static str) -> Result<f64, DecodeError> {
         Ok(f64::from_le_bytes(self.primitive(field)?))
     }
 
     /// A sequence length whose elements take at least `min_element` bytes each: checked against the bytes left.
-    fn length(&mut self, field: &'static str, min_element: usize) -> Result<usize, DecodeError> {
+    pub(crate) fn length(&mut self, field: &'static str, min_element: usize) -> Result<usize, DecodeError> {
         let len = self.u32(field)? as usize;
         let left = self.data.len().saturating_sub(self.pos);
         if len.saturating_mul(min_element) > left {
@@ -646,31 +696,34 @@ impl<'a> Cdr<'a> {
         Ok(len)
     }
 
-    fn string(&mut self, field: &'static str) -> Result<String, DecodeError> {
+    pub(crate) fn string(&mut self, field: &'static str) -> Result<String, DecodeError> {
         let len = self.length(field, 1)?;
         let raw = self.take(field, len)?;
-        let raw = raw.strip_suffix(&[0]).unwrap_or(raw);
+        let raw = match self.encoding {
+            Encoding::Cdr => raw.strip_suffix(&[0]).unwrap_or(raw),
+            Encoding::Ros1 => raw,
+        };
         String::from_utf8(raw.to_vec()).map_err(|_| self.error(field, "string is not valid UTF-8".to_owned()))
     }
 
-    fn byte_sequence(&mut self, field: &'static str) -> Result<Bytes, DecodeError> {
+    pub(crate) fn byte_sequence(&mut self, field: &'static str) -> Result<Bytes, DecodeError> {
         let len = self.length(field, 1)?;
         let start = self.pos;
         self.take(field, len)?;
         Ok(self.data.slice(start..start + len))
     }
 
-    fn f32_sequence(&mut self, field: &'static str) -> Result<Vec<f32>, DecodeError> {
+    pub(crate) fn f32_sequence(&mut self, field: &'static str) -> Result<Vec<f32>, DecodeError> {
         let len = self.length(field, 4)?;
         (0..len).map(|_| self.f32(field)).collect()
     }
 
-    fn f64_sequence(&mut self, field: &'static str) -> Result<Vec<f64>, DecodeError> {
+    pub(crate) fn f64_sequence(&mut self, field: &'static str) -> Result<Vec<f64>, DecodeError> {
         let len = self.length(field, 8)?;
         (0..len).map(|_| self.f64(field)).collect()
     }
 
-    fn f64_array<const N: usize>(&mut self, field: &'static str) -> Result<[f64; N], DecodeError> {
+    pub(crate) fn f64_array<const N: usize>(&mut self, field: &'static str) -> Result<[f64; N], DecodeError> {
         let mut out = [0.0; N];
         for value in &mut out {
             *value = self.f64(field)?;
@@ -679,6 +732,15 @@ impl<'a> Cdr<'a> {
     }
 
     fn header(&mut self) -> Result<Header, DecodeError> {
+        if self.encoding == Encoding::Ros1 {
+            self.u32("header.seq")?;
+            let sec = self.u32("header.stamp.secs")?;
+            return Ok(Header {
+                sec: i32::try_from(sec).unwrap_or(i32::MAX),
+                nanosec: self.u32("header.stamp.nsecs")?,
+                frame_id: self.string("header.frame_id")?,
+            });
+        }
         Ok(Header {
             sec: self.i32("header.stamp.sec")?,
             nanosec: self.u32("header.stamp.nanosec")?,

@@ -85,7 +85,7 @@ fn chunk_with_undefined_channel_is_an_error_that_says_where() {
     assert_eq!(damage.offset, 0, "{text}");
     let recovered = Log::open(&path, ReadOptions { recover: true, ..ReadOptions::default() }).unwrap();
     assert!(recovered.messages.is_empty());
-    assert_eq!(recovered.damage.as_ref(), Some(damage));
+    assert_eq!(recovered.damage.as_ref(), Some(&**damage));
     assert!(recovered.unread_bytes > 0);
 }
 
@@ -105,7 +105,8 @@ fn unclosed_chunk_is_an_error_after_the_header() {
 #[test]
 fn not_an_mcap_file() {
     let error = Log::from_bytes("x", Bytes::from_static(b"hello, world"), ReadOptions::default()).unwrap_err();
-    assert_eq!(error.to_string(), "x: magic record at byte 0: bad magic bytes (not an MCAP file, or a damaged one)");
+    let expected = "x: magic record at byte 0: bad magic bytes (not an MCAP file, a ROS 1 bag v2.0 or a rosbag2 bag, or a damaged one)";
+    assert_eq!(error.to_string(), expected);
     let error = Log::open("/nonexistent/file.mcap", ReadOptions::default()).unwrap_err();
     assert_eq!(error.to_string(), "cannot open /nonexistent/file.mcap");
     let cause = std::error::Error::source(&error).expect("the operating system's error is the source");
