@@ -296,6 +296,19 @@ fn custom_messages_are_described_or_carried_opaque() {
     assert!(text.contains("(rosbag2 sqlite3, ") && described, "{text}");
 }
 
+/// Over RTPS every agent process has the built-in dictionary: the names the log defines reach it anyway (the bridge
+/// teaches them to its graph, the receiver learns them from the deltas), so nothing is refused.
+#[test]
+fn custom_messages_replicate_to_agent_processes_with_the_built_in_dictionary() {
+    let log = repo("datasets/logs/containers/custom_radar_diag_ros1.mcap");
+    let summary = replay_json(&log, &["--transport", "rtps", "--agents", "2", "--domain", "79"]);
+    assert_eq!(summary["bridge"]["described"]["acme_radar_msgs/msg/RadarScan"], 10, "{summary}");
+    assert_eq!(summary["bridge"]["errors"], serde_json::json!({}), "{summary}");
+    assert_eq!(summary["digests_equal"], true, "{summary}");
+    let agents = summary["agent_reports"].as_array().unwrap();
+    assert!(agents.iter().all(|agent| agent["nodes"] == 3), "{summary}");
+}
+
 #[test]
 fn damaged_bag_and_sqlite_are_errors_that_say_where_and_recover() {
     let dir = std::env::temp_dir().join(format!("cortex-replay-damaged-{}", std::process::id()));

@@ -27,8 +27,10 @@
 //! definitions that do not parse and refused graph operations are counted per topic, with the first few messages
 //! kept; they never stop a replay and never panic.
 //!
-//! Replicas that receive the bridge's deltas must use the same [`dictionary`]: it accepts attribute names it does not
-//! know (a described message's fields), each taking the type it is first seen with.
+//! The names a log defines (a described message's fields, the `topic` node type and the opaque attributes) join the
+//! graph's dictionary as the bridge writes them, as a CORTEX file's names do: any replica works, the built-in one of
+//! a `cortex agent` included, and replicas that receive the deltas learn the names from them. [`dictionary`] is the
+//! same set declared up front, for callers that want it.
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
@@ -53,9 +55,9 @@ pub const FRAME_NODE_TYPE: &str = "transform";
 /// How many error messages [`BridgeStats::first_errors`] keeps.
 pub const KEPT_ERRORS: usize = 10;
 
-/// The dictionary of the bridge and of every replica that receives its deltas: the built-in one, accepting unknown
-/// attribute names (those of messages decoded from their definitions), plus the opaque topic node type and its two
-/// attributes.
+/// A dictionary for the bridge's replica declared up front: the built-in one, accepting unknown attribute names
+/// (those of messages decoded from their definitions), plus the opaque topic node type and its two attributes. (The
+/// bridge teaches any replica these names as it writes them; this is for callers that want them declared first.)
 ///
 /// # Errors
 /// Only if the built-in dictionary already gives these names other types.
@@ -125,6 +127,21 @@ enum Failure {
     Definition(#[from] DefinitionError),
     #[error("{0}")]
     Described(#[from] GenericError),
+    #[error("a name of the log cannot be held: {0}")]
+    Name(#[from] DictionaryError),
+}
+
+/// Teaches the replica's dictionary the topic node type and the attribute names (with their types) a message of a
+/// type without a built-in decoder writes: names the log defines join the graph's dictionary, as those of a CORTEX
+/// file do (`dsr::json`), so an agent whose dictionary is the built-in one (every `cortex agent`) writes them, and
+/// every replica that receives them learns them too.
+fn learn_log_names(replica: &mut Replica, values: &[(&str, Value)]) -> Result<(), DictionaryError> {
+    let dictionary = replica.dictionary_mut();
+    dictionary.learn_node_type(OPAQUE_NODE_TYPE)?;
+    for (name, value) in values {
+        dictionary.learn_attr(name, value.value_type())?;
+    }
+    Ok(())
 }
 
 /// A topic's parsed definitions, kept with the schema they were parsed from.
@@ -323,12 +340,13 @@ impl Bridge {
         };
         *self.stats.unknown.entry(key).or_default() += 1;
         if self.options.opaque {
-            let node = self.topic_node_for(replica, now, &channel.topic, OPAQUE_NODE_TYPE, "", deltas)?;
             let values = vec![
                 (OPAQUE_PAYLOAD, Value::Bytes(message.data.clone())),
                 (OPAQUE_TYPE, Value::String(Arc::from(type_name))),
                 (attrs::STAMP_NS.name(), Value::U64(message.log_time.saturating_add(shift_ns))),
             ];
+            learn_log_names(replica, &values)?;
+            let node = self.topic_node_for(replica, now, &channel.topic, OPAQUE_NODE_TYPE, "", deltas)?;
             deltas.push(replica.set_attrs(now, node, values)?);
             self.stats.opaque += 1;
         }
@@ -373,11 +391,12 @@ impl Bridge {
         let sequence = self.next_sequence(topic);
         let stamp_ns = decoded.stamp_ns.unwrap_or(message.log_time).saturating_add(shift_ns);
         let frame = decoded.frame_id.as_deref().unwrap_or("");
-        let node = self.topic_node_for(replica, now, topic, OPAQUE_NODE_TYPE, frame, deltas)?;
         let mut values: Vec<(&str, Value)> = Vec::with_capacity(decoded.values.len() + 2);
         values.extend(decoded.values.iter().map(|(name, value)| (name.as_str(), value.clone())));
         values.push((attrs::STAMP_NS.name(), Value::U64(stamp_ns)));
         values.push((attrs::SEQUENCE.name(), Value::U64(sequence)));
+        learn_log_names(replica, &values)?;
+        let node = self.topic_node_for(replica, now, topic, OPAQUE_NODE_TYPE, frame, deltas)?;
         deltas.push(replica.set_attrs(now, node, values)?);
         *self.stats.described.entry(ros2_type_name(definitions.root())).or_default() += 1;
         self.stats.described_dropped += decoded.dropped;
