@@ -280,7 +280,8 @@ impl Input {
     /// Decodes the deltas of a protocol message (pure; never panics). Call messages give no input.
     pub fn decode(message: Message) -> Decoded {
         let mut rejected = Vec::new();
-        let mut delta = |what: &'static str, bytes: &[u8]| match Delta::decode(bytes) {
+        // Payloads are slices of the received sample: large byte values stay in its buffer (no copy per receiver).
+        let mut delta = |what: &'static str, bytes: &Bytes| match Delta::decode_shared(bytes) {
             Ok(delta) => Some(Arc::new(delta)),
             Err(error) => {
                 rejected.push((what, error.to_string()));

@@ -174,6 +174,18 @@ impl Delta {
         self.borrowed().encode_into(out);
     }
 
+    /// Decodes a delta from a shared buffer, as [`Delta::decode`] does, keeping large byte values (a camera frame) as
+    /// slices of `bytes` instead of copies: the receivers of one sample share its buffer. A byte value is shared when
+    /// it is at least 4 KiB and a quarter of the buffer (so the values of a big snapshot are still copied, and one of
+    /// them kept for long does not hold the whole snapshot alive). Numeric vectors are always converted, one copy:
+    /// their wire form is little-endian bytes at any alignment.
+    ///
+    /// # Errors
+    /// As [`Delta::decode`].
+    pub fn decode_shared(bytes: &bytes::Bytes) -> Result<Delta, DeltaError> {
+        crate::value::decoding_from(bytes, || Delta::decode(bytes))
+    }
+
     /// Decodes a delta, checking its structure.
     ///
     /// # Errors

@@ -494,7 +494,43 @@ mod u64_slice {
     }
 }
 
-/// Encodes `Bytes` as one byte string; decoding copies it once into a fresh buffer.
+std::thread_local! {
+    /// The shared buffer being decoded on this thread, if the decoder was given one ([`decoding_from`]).
+    static SOURCE: std::cell::RefCell<Option<Bytes>> = const { std::cell::RefCell::new(None) };
+}
+
+/// A byte value decoded from `source` is kept as a slice of it when it is at least this big and at least
+/// `1/SHARE_FRACTION` of the buffer: a frame in a one-operation delta is shared, while the values of a large
+/// snapshot are copied, so that one small value kept for long never holds a whole snapshot's buffer alive.
+pub(crate) const SHARE_MIN_BYTES: usize = 4096;
+/// See [`SHARE_MIN_BYTES`].
+pub(crate) const SHARE_FRACTION: usize = 4;
+
+/// `bytes` as a slice of `source` when it lies inside it and is worth sharing ([`SHARE_MIN_BYTES`]).
+fn shared_slice(source: &Bytes, bytes: &[u8]) -> Option<Bytes> {
+    let inside =
+        source.as_ptr_range().contains(&bytes.as_ptr()) && bytes.as_ptr_range().end <= source.as_ptr_range().end;
+    let worth = bytes.len() >= SHARE_MIN_BYTES && bytes.len() * SHARE_FRACTION >= source.len();
+    (inside && worth).then(|| source.slice_ref(bytes))
+}
+
+/// Runs `decode` with `source` as the buffer that byte values may share (see `byte_buffer`); restores the previous
+/// one after, also if `decode` panics (it does not: decoding never panics).
+pub(crate) fn decoding_from<R>(source: &Bytes, decode: impl FnOnce() -> R) -> R {
+    struct Restore(Option<Bytes>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let previous = self.0.take();
+            SOURCE.with_borrow_mut(|slot| *slot = previous);
+        }
+    }
+    let _restore = Restore(SOURCE.with_borrow_mut(|slot| slot.replace(source.clone())));
+    decode()
+}
+
+/// Encodes `Bytes` as one byte string. Decoding copies it once into a fresh buffer, unless the bytes being decoded
+/// are a shared buffer ([`decoding_from`]) and the value is a large part of it: then the value is a slice of that
+/// buffer, no copy (the receivers of one in-process sample then share one frame).
 mod byte_buffer {
     use super::*;
 
@@ -508,10 +544,15 @@ mod byte_buffer {
 
     struct Visitor;
 
-    impl serde::de::Visitor<'_> for Visitor {
+    impl<'de> serde::de::Visitor<'de> for Visitor {
         type Value = Bytes;
         fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
             f.write_str("a byte string")
+        }
+        fn visit_borrowed_bytes<E: serde::de::Error>(self, bytes: &'de [u8]) -> Result<Bytes, E> {
+            Ok(SOURCE
+                .with_borrow(|source| source.as_ref().and_then(|source| shared_slice(source, bytes)))
+                .unwrap_or_else(|| Bytes::copy_from_slice(bytes)))
         }
         fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Bytes, E> {
             Ok(Bytes::copy_from_slice(bytes))

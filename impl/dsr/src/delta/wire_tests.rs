@@ -510,3 +510,42 @@ proptest! {
         same_verdict(&bytes, false)?;
     }
 }
+
+/// The byte value that a decoded delta holds for `name` on node `id`.
+fn byte_value(delta: &Delta, id: crate::ids::NodeId, name: &str) -> bytes::Bytes {
+    match &delta.store.nodes[&id].attrs[name].values[0].value {
+        Value::Bytes(bytes) => bytes.clone(),
+        other => panic!("not bytes: {other:?}"),
+    }
+}
+
+/// Decoding from a shared buffer gives the same delta as decoding a copy; a frame in a one-operation delta is a slice
+/// of the received buffer (no copy per receiver), a small value and the values of a large snapshot are copies.
+#[test]
+fn a_frame_decoded_from_a_shared_buffer_is_a_slice_of_it_and_small_values_are_copies() {
+    let mut writer = Replica::new(ReplicaId(1));
+    let (camera, _) = writer.insert_node(1, NewNode::new("camera", "cam")).unwrap();
+    let frame = Value::Bytes(vec![7u8; 360_960].into());
+    let delta = writer.set_attrs(2, camera, [("cam_rgb", frame)]).unwrap();
+    let sample = bytes::Bytes::from(delta.encode());
+    let shared = Delta::decode_shared(&sample).unwrap();
+    assert_eq!(shared, Delta::decode(&sample).unwrap());
+    let value = byte_value(&shared, camera, "cam_rgb");
+    assert!(sample.as_ptr_range().contains(&value.as_ptr()), "the frame was copied");
+
+    let small = writer.set_attrs(3, camera, [("cam_rgb", Value::Bytes(vec![1u8; 100].into()))]).unwrap();
+    let sample = bytes::Bytes::from(small.encode());
+    let value = byte_value(&Delta::decode_shared(&sample).unwrap(), camera, "cam_rgb");
+    assert!(!sample.as_ptr_range().contains(&value.as_ptr()), "a small value shares the buffer");
+
+    for i in 0..8 {
+        let (other, _) = writer.insert_node(4 + i, NewNode::new("camera", &format!("cam{i}"))).unwrap();
+        writer.set_attrs(20 + i, other, [("cam_rgb", Value::Bytes(vec![i as u8; 100_000].into()))]).unwrap();
+    }
+    let snapshot = bytes::Bytes::from(writer.snapshot().encode());
+    let decoded = Delta::decode_shared(&snapshot).unwrap();
+    for (_, node) in decoded.store.nodes.iter().filter(|(_, node)| node.attrs.contains_key("cam_rgb")) {
+        let Value::Bytes(value) = &node.attrs["cam_rgb"].values[0].value else { panic!("not bytes") };
+        assert!(!snapshot.as_ptr_range().contains(&value.as_ptr()), "a snapshot's value holds the whole snapshot");
+    }
+}
