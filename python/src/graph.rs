@@ -50,11 +50,12 @@ pub struct NodeCopy {
     edges: Vec<EdgeCopy>,
 }
 
-fn attr_copies(names: impl Iterator<Item = String>, entry: impl Fn(&str) -> Option<(Value, u64, u32)>) -> Vec<AttrCopy> {
+fn attr_copies(
+    names: impl Iterator<Item = String>,
+    entry: impl Fn(&str) -> Option<(Value, u64, u32)>,
+) -> Vec<AttrCopy> {
     names
-        .filter_map(|name| {
-            entry(&name).map(|(value, stamp_ns, agent)| AttrCopy { name, value, stamp_ns, agent })
-        })
+        .filter_map(|name| entry(&name).map(|(value, stamp_ns, agent)| AttrCopy { name, value, stamp_ns, agent }))
         .collect()
 }
 
@@ -154,7 +155,10 @@ impl NodeRefArg {
         if object.is_instance_of::<PyInt>() {
             return Ok(NodeRefArg::Id(NodeId(object.extract()?)));
         }
-        Err(PyTypeError::new_err(format!("a node is given by its id (int) or its name (str), not {}", object.get_type())))
+        Err(PyTypeError::new_err(format!(
+            "a node is given by its id (int) or its name (str), not {}",
+            object.get_type()
+        )))
     }
 
     /// The id of the visible node this names.
@@ -235,12 +239,20 @@ impl DsrGraph {
         copy.map(|c| node_object(py, c)).transpose()
     }
 
-    fn nodes_where(&self, py: Python<'_>, keep: impl Fn(&NodeRef<'_>) -> bool + Send + Sync) -> PyResult<Vec<Py<Node>>> {
+    fn nodes_where(
+        &self,
+        py: Python<'_>,
+        keep: impl Fn(&NodeRef<'_>) -> bool + Send + Sync,
+    ) -> PyResult<Vec<Py<Node>>> {
         let copies = self.read(py, |r| r.nodes().filter(|n| keep(n)).map(|n| node_copy(r, &n)).collect::<Vec<_>>())?;
         copies.into_iter().map(|c| node_object(py, c)).collect()
     }
 
-    fn edges_where(&self, py: Python<'_>, keep: impl Fn(&EdgeRef<'_>) -> bool + Send + Sync) -> PyResult<Vec<Py<Edge>>> {
+    fn edges_where(
+        &self,
+        py: Python<'_>,
+        keep: impl Fn(&EdgeRef<'_>) -> bool + Send + Sync,
+    ) -> PyResult<Vec<Py<Edge>>> {
         let copies = self.read(py, |r| r.edges().filter(|e| keep(e)).map(|e| edge_copy(&e)).collect::<Vec<_>>())?;
         copies.into_iter().map(|c| edge_object(py, c)).collect()
     }
@@ -395,7 +407,8 @@ impl DsrGraph {
                     }
                     Err(OpError::NameTaken(_)) if generated && attempt < 64 => {
                         attempt += 1;
-                        new_node.name = format!("{}_{}", new_node.node_type, GENERATED_NAMES.fetch_add(1, Ordering::Relaxed) + 1);
+                        new_node.name =
+                            format!("{}_{}", new_node.node_type, GENERATED_NAMES.fetch_add(1, Ordering::Relaxed) + 1);
                     }
                     Err(error) => break Err(error),
                 }
@@ -425,7 +438,8 @@ impl DsrGraph {
     fn update_node(&self, py: Python<'_>, node: PyRef<'_, Node>) -> PyResult<bool> {
         let (id, attrs) = (NodeId(node.id), node.attrs.borrow(py).to_values(py));
         drop(node);
-        let result = self.write(py, move |replica, now, deltas| Self::sync_attrs(replica, now, Element::Node(id), attrs, deltas))?;
+        let result = self
+            .write(py, move |replica, now, deltas| Self::sync_attrs(replica, now, Element::Node(id), attrs, deltas))?;
         result.or_else(|error| if is_absence(&error) { Ok(false) } else { Err(runtime_error(error)) })
     }
 
@@ -441,7 +455,13 @@ impl DsrGraph {
 
     /// `get_edge(from, to, type)` with ids or names: a copy of the edge, or `None`.
     #[pyo3(signature = (r#from, to, r#type))]
-    fn get_edge(&self, py: Python<'_>, r#from: &Bound<'_, PyAny>, to: &Bound<'_, PyAny>, r#type: String) -> PyResult<Option<Py<Edge>>> {
+    fn get_edge(
+        &self,
+        py: Python<'_>,
+        r#from: &Bound<'_, PyAny>,
+        to: &Bound<'_, PyAny>,
+        r#type: String,
+    ) -> PyResult<Option<Py<Edge>>> {
         let (from, to) = (NodeRefArg::extract(r#from)?, NodeRefArg::extract(to)?);
         let copy = self.read(py, move |r| {
             let key = EdgeKey::new(from.resolve(r)?, to.resolve(r)?, &r#type);
@@ -469,7 +489,13 @@ impl DsrGraph {
 
     /// `delete_edge(from, to, type)` with ids or names; `False` if there is no such edge.
     #[pyo3(signature = (r#from, to, r#type))]
-    fn delete_edge(&self, py: Python<'_>, r#from: &Bound<'_, PyAny>, to: &Bound<'_, PyAny>, r#type: String) -> PyResult<bool> {
+    fn delete_edge(
+        &self,
+        py: Python<'_>,
+        r#from: &Bound<'_, PyAny>,
+        to: &Bound<'_, PyAny>,
+        r#type: String,
+    ) -> PyResult<bool> {
         let (from, to) = (NodeRefArg::extract(r#from)?, NodeRefArg::extract(to)?);
         let agent = self.agent()?;
         py.detach(|| {
@@ -503,6 +529,12 @@ impl DsrGraph {
     /// This agent's id.
     fn get_agent_id(&self) -> PyResult<u32> {
         Ok(self.agent()?.id().0)
+    }
+
+    /// The graph's digest (BLAKE3 of the visible graph, hex), as `cortex agent`'s status line shows it: two
+    /// agents with equal digests show the same graph. (Not in pydsr.)
+    fn digest(&self, py: Python<'_>) -> PyResult<String> {
+        self.read(py, |r| r.digest().to_string())
     }
 
     /// The name given to the constructor.

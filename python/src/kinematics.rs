@@ -105,24 +105,35 @@ impl RtApi {
 
     /// The node's pose in its RT parent's frame (4×4), or `None` for a root or a node that does not exist.
     #[pyo3(name = "get_RT_pose_from_parent")]
-    fn get_rt_pose_from_parent<'py>(&self, py: Python<'py>, node: PyRef<'_, Node>) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn get_rt_pose_from_parent<'py>(
+        &self,
+        py: Python<'py>,
+        node: PyRef<'_, Node>,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let id = NodeId(node.id);
         drop(node);
-        let pose = self.read(py, move |r| r.rt_parent_edge(id).ok().flatten().and_then(|e| dsr::kinematics::edge_pose(&e).ok()))?;
+        let pose = self
+            .read(py, move |r| r.rt_parent_edge(id).ok().flatten().and_then(|e| dsr::kinematics::edge_pose(&e).ok()))?;
         pose.map(|p| matrix4(py, &p)).transpose()
     }
 
     /// The 4×4 matrix of an RT edge object's translation and rotation, or `None` if it lacks them.
     #[pyo3(signature = (edge, timestamp = 0))]
     #[pyo3(name = "get_edge_RT_as_rtmat")]
-    fn get_edge_rt_as_rtmat<'py>(&self, py: Python<'py>, edge: PyRef<'_, Edge>, timestamp: u64) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn get_edge_rt_as_rtmat<'py>(
+        &self,
+        py: Python<'py>,
+        edge: PyRef<'_, Edge>,
+        timestamp: u64,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
         let attrs = edge.attrs.borrow(py);
         let value = |names: [&str; 2]| -> Option<Value> {
             names.iter().find_map(|name| attrs.entries.get(*name).map(|a| a.borrow(py).value.clone()))
         };
         let translation = first_three(value([attrs::RT_TRANSLATION.name(), attrs::TRANSLATION.name()]).as_ref());
-        let rotation = first_three(value([attrs::RT_ROTATION_EULER_XYZ.name(), attrs::ROTATION_EULER_XYZ.name()]).as_ref());
+        let rotation =
+            first_three(value([attrs::RT_ROTATION_EULER_XYZ.name(), attrs::ROTATION_EULER_XYZ.name()]).as_ref());
         match (translation, rotation) {
             (Some(t), Some(r)) => matrix4(py, &rt_isometry(t, r)).map(Some),
             _ => Ok(None),
@@ -131,7 +142,13 @@ impl RtApi {
 
     /// The translation of the RT edge from `node_id` to `to` (mm), or `None`.
     #[pyo3(signature = (node_id, to, timestamp = 0))]
-    fn get_translation<'py>(&self, py: Python<'py>, node_id: u64, to: u64, timestamp: u64) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn get_translation<'py>(
+        &self,
+        py: Python<'py>,
+        node_id: u64,
+        to: u64,
+        timestamp: u64,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
         let key = EdgeKey::new(NodeId(node_id), NodeId(to), "RT");
         let translation = self.read(py, move |r| {
@@ -230,28 +247,52 @@ impl InnerApi {
 
     /// The 4×4 matrix from `orig`'s frame to `dest`'s.
     #[pyo3(signature = (dest, orig, timestamp = 0))]
-    fn get_transformation_matrix<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn get_transformation_matrix<'py>(
+        &self,
+        py: Python<'py>,
+        dest: String,
+        orig: String,
+        timestamp: u64,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
         self.pose(py, dest, orig)?.map(|p| matrix4(py, &p)).transpose()
     }
 
     /// The 3×3 rotation from `orig`'s frame to `dest`'s.
     #[pyo3(signature = (dest, orig, timestamp = 0))]
-    fn get_rotation_matrix<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn get_rotation_matrix<'py>(
+        &self,
+        py: Python<'py>,
+        dest: String,
+        orig: String,
+        timestamp: u64,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
         self.pose(py, dest, orig)?.map(|p| matrix3(py, &p)).transpose()
     }
 
     /// The translation from `orig`'s frame to `dest`'s (mm).
     #[pyo3(signature = (dest, orig, timestamp = 0))]
-    fn get_translation_vector<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn get_translation_vector<'py>(
+        &self,
+        py: Python<'py>,
+        dest: String,
+        orig: String,
+        timestamp: u64,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
         Ok(self.pose(py, dest, orig)?.map(|p| vector(py, &translation_mm(&p))))
     }
 
     /// The Euler angles x, y, z (rad) of the rotation from `orig`'s frame to `dest`'s.
     #[pyo3(signature = (dest, orig, timestamp = 0))]
-    fn get_euler_xyz_angles<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn get_euler_xyz_angles<'py>(
+        &self,
+        py: Python<'py>,
+        dest: String,
+        orig: String,
+        timestamp: u64,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
         Ok(self.pose(py, dest, orig)?.map(|p| vector(py, &euler_xyz(&p.rotation))))
     }

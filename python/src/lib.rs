@@ -52,8 +52,19 @@ fn cortex_dsr(py: Python<'_>, module: &Bound<'_, PyModule>) -> PyResult<()> {
     let mutable_mapping = py.import("collections.abc")?.getattr("MutableMapping")?;
     mutable_mapping.call_method1("register", (module.getattr("MapStringAttribute")?,))?;
     mutable_mapping.call_method1("register", (module.getattr("MapStringEdge")?,))?;
-    module.add("__all__", [
-        "Attribute", "Node", "Edge", "DSRGraph", "rt_api", "inner_api", "signals", "MapStringAttribute", "MapStringEdge",
-    ])?;
+    module.add(
+        "__all__",
+        [
+            "Attribute",
+            "Node",
+            "Edge",
+            "DSRGraph",
+            "rt_api",
+            "inner_api",
+            "signals",
+            "MapStringAttribute",
+            "MapStringEdge",
+        ],
+    )?;
     Ok(())
 }

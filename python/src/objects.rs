@@ -86,7 +86,13 @@ impl Attribute {
     }
 
     fn __repr__(&self) -> String {
-        format!(" < {} ({}) by agent {} at {} > ", preview(&self.value), values::type_name(self.value.value_type()), self.agent_id, self.timestamp)
+        format!(
+            " < {} ({}) by agent {} at {} > ",
+            preview(&self.value),
+            values::type_name(self.value.value_type()),
+            self.agent_id,
+            self.timestamp
+        )
     }
 }
 
@@ -137,7 +143,9 @@ impl AttrMap {
         if let Ok(map) = mapping.cast::<AttrMap>() {
             return map.borrow().copy(py);
         }
-        let dict = mapping.cast::<PyDict>().map_err(|_| PyTypeError::new_err("attrs must be a mapping of str to Attribute"))?;
+        let dict = mapping
+            .cast::<PyDict>()
+            .map_err(|_| PyTypeError::new_err("attrs must be a mapping of str to Attribute"))?;
         let mut map = AttrMap::default();
         for (name, attribute) in dict.iter() {
             let attribute = attribute.cast::<Attribute>()?.borrow();
@@ -231,7 +239,14 @@ fn check_type(what: &str, name: &str, known: &[&str]) -> PyResult<()> {
 
 impl Edge {
     /// An edge object with the given attributes.
-    pub fn build(py: Python<'_>, from: u64, to: u64, edge_type: String, agent_id: u32, attrs: AttrMap) -> PyResult<Edge> {
+    pub fn build(
+        py: Python<'_>,
+        from: u64,
+        to: u64,
+        edge_type: String,
+        agent_id: u32,
+        attrs: AttrMap,
+    ) -> PyResult<Edge> {
         Ok(Edge { to, from, edge_type, agent_id, attrs: Py::new(py, attrs)? })
     }
 
@@ -313,7 +328,9 @@ impl EdgeMap {
         if let Ok(map) = mapping.cast::<EdgeMap>() {
             return map.borrow().copy(py);
         }
-        let dict = mapping.cast::<PyDict>().map_err(|_| PyTypeError::new_err("edges must be a mapping of (to, type) to Edge"))?;
+        let dict = mapping
+            .cast::<PyDict>()
+            .map_err(|_| PyTypeError::new_err("edges must be a mapping of (to, type) to Edge"))?;
         let mut map = EdgeMap::default();
         for (key, edge) in dict.iter() {
             map.entries.insert(key.extract()?, Py::new(py, edge.cast::<Edge>()?.borrow().copy(py)?)?);

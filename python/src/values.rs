@@ -142,9 +142,9 @@ fn floats(items: &[Bound<'_, PyAny>]) -> PyResult<Vec<f32>> {
             if item.is_instance_of::<PyBool>() {
                 return Err(PyTypeError::new_err("a vector of floats cannot hold a bool"));
             }
-            item.extract::<f64>().map(|x| x as f32).map_err(|_| {
-                PyTypeError::new_err(format!("a vector attribute holds numbers, not {}", item.get_type()))
-            })
+            item.extract::<f64>()
+                .map(|x| x as f32)
+                .map_err(|_| PyTypeError::new_err(format!("a vector attribute holds numbers, not {}", item.get_type())))
         })
         .collect()
 }
