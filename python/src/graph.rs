@@ -21,6 +21,9 @@ use transport::rtps::{RtpsConfig, RtpsTransport};
 use crate::objects::{AttrMap, Attribute, Edge, EdgeMap, LOCAL_AGENT_ID, Node};
 use crate::signals::SignalHub;
 
+/// An edge to insert with a node: destination, type, attributes.
+type EdgeToInsert = (u64, String, Vec<(String, Value)>);
+
 /// The agent type behind a `DSRGraph`.
 pub type GraphAgent = Agent<RtpsTransport>;
 
@@ -384,7 +387,7 @@ impl DsrGraph {
             let mut new_node = NewNode::new(&n.node_type, &name);
             new_node.id = (n.id != 0).then_some(NodeId(n.id));
             new_node.attrs = n.attrs.borrow(py).to_values(py);
-            let edges: Vec<(u64, String, Vec<(String, Value)>)> = n
+            let edges: Vec<EdgeToInsert> = n
                 .edges
                 .borrow(py)
                 .entries

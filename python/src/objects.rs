@@ -99,7 +99,10 @@ impl Attribute {
 /// A short text form of a value (first elements of a vector).
 fn preview(value: &Value) -> String {
     let text = format!("{value:?}");
-    if text.len() > 80 { format!("{}...", &text[..text.floor_char_boundary(77)]) } else { text }
+    match text.char_indices().nth(77) {
+        Some((cut, _)) if text.len() > 80 => format!("{}...", &text[..cut]),
+        _ => text,
+    }
 }
 
 /// `Node.attrs` / `Edge.attrs`: a mutable mapping from attribute names to `Attribute`s, in name order.
