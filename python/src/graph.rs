@@ -133,6 +133,11 @@ fn is_absence(error: &OpError) -> bool {
     )
 }
 
+/// A replica refusal as `Ok(false)` for absence, else a `RuntimeError`.
+fn absent_is_false(result: Result<bool, OpError>) -> PyResult<bool> {
+    result.or_else(|error| if is_absence(&error) { Ok(false) } else { Err(runtime_error(error)) })
+}
+
 /// An agent error as `Ok(false)` for absence, else a `RuntimeError`.
 fn absent_or_error(error: agent::AgentError) -> PyResult<bool> {
     match &error {
@@ -171,6 +176,11 @@ impl NodeRefArg {
             NodeRefArg::Name(name) => replica.node_by_name(name).map(|n| n.id()),
         }
     }
+}
+
+/// The key of the edge between two visible nodes given by id or name (the edge itself may not exist).
+fn edge_key(replica: &Replica, from: &NodeRefArg, to: &NodeRefArg, edge_type: &str) -> Option<EdgeKey> {
+    Some(EdgeKey::new(from.resolve(replica)?, to.resolve(replica)?, edge_type))
 }
 
 /// `DSRGraph(root, name, id, dsr_input_file="", all_same_host=True)`: a DSR_d agent of this process, joined to
@@ -443,7 +453,7 @@ impl DsrGraph {
         drop(node);
         let result = self
             .write(py, move |replica, now, deltas| Self::sync_attrs(replica, now, Element::Node(id), attrs, deltas))?;
-        result.or_else(|error| if is_absence(&error) { Ok(false) } else { Err(runtime_error(error)) })
+        absent_is_false(result)
     }
 
     /// `delete_node(id)` or `delete_node(name)`: deletes the node and its edges; `False` if there is none.
@@ -467,7 +477,7 @@ impl DsrGraph {
     ) -> PyResult<Option<Py<Edge>>> {
         let (from, to) = (NodeRefArg::extract(r#from)?, NodeRefArg::extract(to)?);
         let copy = self.read(py, move |r| {
-            let key = EdgeKey::new(from.resolve(r)?, to.resolve(r)?, &r#type);
+            let key = edge_key(r, &from, &to, &r#type)?;
             r.edge(&key).map(|e| edge_copy(&e))
         })?;
         copy.map(|c| edge_object(py, c)).transpose()
@@ -487,7 +497,7 @@ impl DsrGraph {
             deltas.push(delta);
             Ok(true)
         })?;
-        result.or_else(|error| if is_absence(&error) { Ok(false) } else { Err(runtime_error(error)) })
+        absent_is_false(result)
     }
 
     /// `delete_edge(from, to, type)` with ids or names; `False` if there is no such edge.
@@ -502,7 +512,7 @@ impl DsrGraph {
         let (from, to) = (NodeRefArg::extract(r#from)?, NodeRefArg::extract(to)?);
         let agent = self.agent()?;
         py.detach(|| {
-            let key = agent.read(|r| Some(EdgeKey::new(from.resolve(r)?, to.resolve(r)?, &r#type))).flatten();
+            let key = agent.read(|r| edge_key(r, &from, &to, &r#type)).flatten();
             match key {
                 Some(key) => agent.delete_edge(&key).map(|()| true).or_else(absent_or_error),
                 None => Ok(false),

@@ -185,7 +185,50 @@ impl TransformArgs {
     }
 }
 
+/// A numpy answer, or `None` where pydsr answers `None`.
+type Answer<'py> = PyResult<Option<Bound<'py, PyAny>>>;
+
+/// What `inner_api`'s matrix getters return of a transform.
+#[derive(Clone, Copy)]
+enum Wanted {
+    Matrix,
+    Rotation,
+    Translation,
+    Euler,
+}
+
 impl InnerApi {
+    /// The transform from `orig`'s frame to `dest`'s as `wanted` (`timestamp` is ignored: no RT history).
+    fn answer<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64, wanted: Wanted) -> Answer<'py> {
+        let _ = timestamp;
+        let Some(pose) = self.pose(py, dest, orig)? else { return Ok(None) };
+        Ok(Some(match wanted {
+            Wanted::Matrix => matrix4(py, &pose)?,
+            Wanted::Rotation => matrix3(py, &pose)?,
+            Wanted::Translation => vector(py, &translation_mm(&pose)),
+            Wanted::Euler => vector(py, &euler_xyz(&pose.rotation)),
+        }))
+    }
+
+    /// pydsr's `(dest, orig[, timestamp])` or `(dest, vector, orig[, timestamp])`: the transform and the vector
+    /// (`len` zeros in the first form), or `None` when the transform cannot be computed.
+    fn pose_and_vector(
+        &self,
+        py: Python<'_>,
+        dest: String,
+        second: &Bound<'_, PyAny>,
+        third: Option<&Bound<'_, PyAny>>,
+        len: usize,
+    ) -> PyResult<Option<(Isometry3<f64>, Vec<f64>)>> {
+        // A third positional int is the first form's timestamp.
+        let args = TransformArgs::parse(dest, second, third.filter(|t| !t.is_instance_of::<pyo3::types::PyInt>()))?;
+        let vector = args.vector.unwrap_or_else(|| vec![0.0; len]);
+        if vector.len() != len {
+            return Err(PyTypeError::new_err(format!("the vector needs {len} values, not {}", vector.len())));
+        }
+        Ok(self.pose(py, args.dest, args.orig)?.map(|pose| (pose, vector)))
+    }
+
     /// The isometry from `orig`'s frame to `dest`'s, or `None` when it cannot be computed.
     fn pose(&self, py: Python<'_>, dest: String, orig: String) -> PyResult<Option<Isometry3<f64>>> {
         self.graph.bind(py).borrow().read(py, move |r| {
@@ -214,10 +257,8 @@ impl InnerApi {
         timestamp: Option<u64>,
     ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
-        let args = TransformArgs::parse(dest, second, third.filter(|t| !t.is_instance_of::<pyo3::types::PyInt>()))?;
-        let point = three("vector", args.vector.unwrap_or_else(|| vec![0.0; 3]))?;
-        let Some(pose) = self.pose(py, args.dest, args.orig)? else { return Ok(None) };
-        let p = pose * nalgebra::Point3::from(point);
+        let Some((pose, point)) = self.pose_and_vector(py, dest, second, third, 3)? else { return Ok(None) };
+        let p = pose * nalgebra::Point3::new(point[0], point[1], point[2]);
         Ok(Some(vector(py, &[p.x, p.y, p.z])))
     }
 
@@ -232,13 +273,7 @@ impl InnerApi {
         timestamp: Option<u64>,
     ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let _ = timestamp;
-        let args = TransformArgs::parse(dest, second, third.filter(|t| !t.is_instance_of::<pyo3::types::PyInt>()))?;
-        let axis: [f64; 6] = args
-            .vector
-            .unwrap_or_else(|| vec![0.0; 6])
-            .try_into()
-            .map_err(|v: Vec<f64>| PyTypeError::new_err(format!("vector needs 6 values, not {}", v.len())))?;
-        let Some(pose) = self.pose(py, args.dest, args.orig)? else { return Ok(None) };
+        let Some((pose, axis)) = self.pose_and_vector(py, dest, second, third, 6)? else { return Ok(None) };
         let moved = pose * rt_isometry([axis[0], axis[1], axis[2]], [axis[3], axis[4], axis[5]]);
         let [x, y, z] = translation_mm(&moved);
         let [a, b, c] = euler_xyz(&moved.rotation);
@@ -253,47 +288,25 @@ impl InnerApi {
         dest: String,
         orig: String,
         timestamp: u64,
-    ) -> PyResult<Option<Bound<'py, PyAny>>> {
-        let _ = timestamp;
-        self.pose(py, dest, orig)?.map(|p| matrix4(py, &p)).transpose()
+    ) -> Answer<'py> {
+        self.answer(py, dest, orig, timestamp, Wanted::Matrix)
     }
 
     /// The 3×3 rotation from `orig`'s frame to `dest`'s.
     #[pyo3(signature = (dest, orig, timestamp = 0))]
-    fn get_rotation_matrix<'py>(
-        &self,
-        py: Python<'py>,
-        dest: String,
-        orig: String,
-        timestamp: u64,
-    ) -> PyResult<Option<Bound<'py, PyAny>>> {
-        let _ = timestamp;
-        self.pose(py, dest, orig)?.map(|p| matrix3(py, &p)).transpose()
+    fn get_rotation_matrix<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64) -> Answer<'py> {
+        self.answer(py, dest, orig, timestamp, Wanted::Rotation)
     }
 
     /// The translation from `orig`'s frame to `dest`'s (mm).
     #[pyo3(signature = (dest, orig, timestamp = 0))]
-    fn get_translation_vector<'py>(
-        &self,
-        py: Python<'py>,
-        dest: String,
-        orig: String,
-        timestamp: u64,
-    ) -> PyResult<Option<Bound<'py, PyAny>>> {
-        let _ = timestamp;
-        Ok(self.pose(py, dest, orig)?.map(|p| vector(py, &translation_mm(&p))))
+    fn get_translation_vector<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64) -> Answer<'py> {
+        self.answer(py, dest, orig, timestamp, Wanted::Translation)
     }
 
     /// The Euler angles x, y, z (rad) of the rotation from `orig`'s frame to `dest`'s.
     #[pyo3(signature = (dest, orig, timestamp = 0))]
-    fn get_euler_xyz_angles<'py>(
-        &self,
-        py: Python<'py>,
-        dest: String,
-        orig: String,
-        timestamp: u64,
-    ) -> PyResult<Option<Bound<'py, PyAny>>> {
-        let _ = timestamp;
-        Ok(self.pose(py, dest, orig)?.map(|p| vector(py, &euler_xyz(&p.rotation))))
+    fn get_euler_xyz_angles<'py>(&self, py: Python<'py>, dest: String, orig: String, timestamp: u64) -> Answer<'py> {
+        self.answer(py, dest, orig, timestamp, Wanted::Euler)
     }
 }

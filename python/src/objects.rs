@@ -14,7 +14,7 @@ use dsr::Value;
 use dsr::dictionary::{BUILTIN_EDGE_TYPES, BUILTIN_NODE_TYPES};
 use pyo3::exceptions::{PyKeyError, PyRuntimeError, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList, PyTuple};
+use pyo3::types::{PyDict, PyList};
 
 use crate::values;
 
@@ -158,62 +158,73 @@ impl AttrMap {
     }
 }
 
-#[pymethods]
-impl AttrMap {
+/// The `#[pymethods]` of a mapping class: the methods both maps share (pydsr's bound `std::map`: `[]`, `in`,
+/// `len`, `del`, iteration over keys, `keys`, `values`, `items`, `get`, `clear`; `KeyError` for a missing key),
+/// then the class's own (`__new__`, `__setitem__`, ...).
+macro_rules! mapping_methods {
+    ($map:ty, $key:ty, $value:ty, { $($own:tt)* }) => {
+        #[pymethods]
+        impl $map {
+            fn __getitem__(&self, py: Python<'_>, key: $key) -> PyResult<Py<$value>> {
+                self.entries.get(&key).map(|v| v.clone_ref(py)).ok_or_else(|| PyKeyError::new_err(key))
+            }
+
+            fn __delitem__(&mut self, key: $key) -> PyResult<()> {
+                self.entries.remove(&key).map(drop).ok_or_else(|| PyKeyError::new_err(key))
+            }
+
+            fn __contains__(&self, key: $key) -> bool {
+                self.entries.contains_key(&key)
+            }
+
+            fn __len__(&self) -> usize {
+                self.entries.len()
+            }
+
+            fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+                self.keys(py)?.try_iter().map(Bound::into_any)
+            }
+
+            fn keys<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+                PyList::new(py, self.entries.keys())
+            }
+
+            fn values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+                PyList::new(py, self.entries.values().map(|v| v.clone_ref(py)))
+            }
+
+            fn items<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+                PyList::new(py, self.entries.iter().map(|(k, v)| (k.clone(), v.clone_ref(py))))
+            }
+
+            #[pyo3(signature = (key, default = None))]
+            fn get(&self, py: Python<'_>, key: $key, default: Option<Py<PyAny>>) -> Option<Py<PyAny>> {
+                self.entries.get(&key).map(|v| v.clone_ref(py).into_any()).or(default)
+            }
+
+            fn clear(&mut self) {
+                self.entries.clear();
+            }
+
+            $($own)*
+        }
+    };
+}
+
+mapping_methods!(AttrMap, String, Attribute, {
     #[new]
     fn py_new() -> Self {
         AttrMap::default()
-    }
-
-    fn __getitem__(&self, py: Python<'_>, name: &str) -> PyResult<Py<Attribute>> {
-        self.entries.get(name).map(|a| a.clone_ref(py)).ok_or_else(|| PyKeyError::new_err(name.to_owned()))
     }
 
     fn __setitem__(&mut self, py: Python<'_>, name: String, attribute: PyRef<'_, Attribute>) -> PyResult<()> {
         self.store(py, name, &attribute)
     }
 
-    fn __delitem__(&mut self, name: &str) -> PyResult<()> {
-        self.entries.remove(name).map(drop).ok_or_else(|| PyKeyError::new_err(name.to_owned()))
-    }
-
-    fn __contains__(&self, name: &str) -> bool {
-        self.entries.contains_key(name)
-    }
-
-    fn __len__(&self) -> usize {
-        self.entries.len()
-    }
-
-    fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        PyList::new(py, self.entries.keys())?.try_iter().map(Bound::into_any)
-    }
-
-    fn keys<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        PyList::new(py, self.entries.keys())
-    }
-
-    fn values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        PyList::new(py, self.entries.values().map(|a| a.clone_ref(py)))
-    }
-
-    fn items<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        PyList::new(py, self.entries.iter().map(|(k, a)| (k.clone(), a.clone_ref(py))))
-    }
-
-    #[pyo3(signature = (name, default = None))]
-    fn get(&self, py: Python<'_>, name: &str, default: Option<Py<PyAny>>) -> Option<Py<PyAny>> {
-        self.entries.get(name).map(|a| a.clone_ref(py).into_any()).or(default)
-    }
-
-    fn clear(&mut self) {
-        self.entries.clear();
-    }
-
     fn __repr__(&self, py: Python<'_>) -> String {
         self.entries.iter().map(|(k, a)| format!("      [{k}] -- {}\n", a.borrow(py).__repr__())).collect()
     }
-}
+});
 
 /// `Edge(to, from, type, agent_id)` (pydsr's argument order): an edge copy with its attributes.
 #[pyclass(module = "cortex_dsr", name = "Edge")]
@@ -342,61 +353,17 @@ impl EdgeMap {
     }
 }
 
-#[pymethods]
-impl EdgeMap {
+mapping_methods!(EdgeMap, (u64, String), Edge, {
     #[new]
     fn py_new() -> Self {
         EdgeMap::default()
-    }
-
-    fn __getitem__(&self, py: Python<'_>, key: (u64, String)) -> PyResult<Py<Edge>> {
-        self.entries.get(&key).map(|e| e.clone_ref(py)).ok_or_else(|| PyKeyError::new_err(key))
     }
 
     fn __setitem__(&mut self, py: Python<'_>, key: (u64, String), edge: PyRef<'_, Edge>) -> PyResult<()> {
         self.entries.insert(key, Py::new(py, edge.copy(py)?)?);
         Ok(())
     }
-
-    fn __delitem__(&mut self, key: (u64, String)) -> PyResult<()> {
-        self.entries.remove(&key).map(drop).ok_or_else(|| PyKeyError::new_err(key))
-    }
-
-    fn __contains__(&self, key: (u64, String)) -> bool {
-        self.entries.contains_key(&key)
-    }
-
-    fn __len__(&self) -> usize {
-        self.entries.len()
-    }
-
-    fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        self.keys(py)?.try_iter().map(Bound::into_any)
-    }
-
-    fn keys<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        let keys: Vec<Bound<'py, PyTuple>> =
-            self.entries.keys().map(|(to, t)| (*to, t.as_str()).into_pyobject(py)).collect::<PyResult<_>>()?;
-        PyList::new(py, keys)
-    }
-
-    fn values<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        PyList::new(py, self.entries.values().map(|e| e.clone_ref(py)))
-    }
-
-    fn items<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        PyList::new(py, self.entries.iter().map(|(k, e)| (k.clone(), e.clone_ref(py))))
-    }
-
-    #[pyo3(signature = (key, default = None))]
-    fn get(&self, py: Python<'_>, key: (u64, String), default: Option<Py<PyAny>>) -> Option<Py<PyAny>> {
-        self.entries.get(&key).map(|e| e.clone_ref(py).into_any()).or(default)
-    }
-
-    fn clear(&mut self) {
-        self.entries.clear();
-    }
-}
+});
 
 /// `Node(agent_id, type, name="")`: a node copy with its attributes and outgoing edges.
 #[pyclass(module = "cortex_dsr", name = "Node")]

@@ -7,6 +7,7 @@ import os
 import shutil
 import tempfile
 import time
+import unittest
 
 import cortex_dsr
 
@@ -104,3 +105,21 @@ def cortex_binary():
         if os.access(candidate, os.X_OK):
             return candidate
     return None
+
+
+class GraphTestCase(unittest.TestCase):
+    """A test with a fresh graph (`self.g`) started alone from the fixture on a topic of its own, closed after."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.fixture = Fixture()
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.fixture.remove()
+
+    def setUp(self):
+        self.g = new_graph(self.fixture.path)
+
+    def tearDown(self):
+        self.g.close()

@@ -190,22 +190,8 @@ class NodeBehaviour(unittest.TestCase):
             n.edges[(11, "RT")]
 
 
-class GraphCase(unittest.TestCase):
+class GraphCase(support.GraphTestCase):
     """One graph per test, started alone from the fixture on a topic of its own."""
-
-    @classmethod
-    def setUpClass(cls):
-        cls.fixture = support.Fixture()
-
-    @classmethod
-    def tearDownClass(cls):
-        cls.fixture.remove()
-
-    def setUp(self):
-        self.g = support.new_graph(self.fixture.path)
-
-    def tearDown(self):
-        self.g.close()
 
 
 class GraphReads(GraphCase):

@@ -10,21 +10,10 @@ from cortex_dsr import *  # noqa: F401,F403
 import support
 
 
-class SignalCase(unittest.TestCase):
-    @classmethod
-    def setUpClass(cls):
-        cls.fixture = support.Fixture()
-
-    @classmethod
-    def tearDownClass(cls):
-        cls.fixture.remove()
-
+class SignalCase(support.GraphTestCase):
     def setUp(self):
-        self.g = support.new_graph(self.fixture.path)
+        super().setUp()
         self.calls = queue.Queue()
-
-    def tearDown(self):
-        self.g.close()
 
     def record(self, kind):
         def callback(*args):
