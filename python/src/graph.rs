@@ -185,7 +185,7 @@ fn edge_key(replica: &Replica, from: &NodeRefArg, to: &NodeRefArg, edge_type: &s
 
 /// `DSRGraph(root, name, id, dsr_input_file="", all_same_host=True)`: a DSR_d agent of this process, joined to
 /// the agents of its DDS domain and topic prefix, or started from the JSON file when none answers.
-#[pyclass(module = "cortex_dsr", name = "DSRGraph")]
+#[pyclass(module = "cortex_dsr", name = "DSRGraph", weakref)]
 pub struct DsrGraph {
     agent: Option<Arc<GraphAgent>>,
     /// The signal callbacks and their dispatcher.
@@ -345,6 +345,18 @@ impl DsrGraph {
         let seed = (!dsr_input_file.is_empty()).then(|| Path::new(&dsr_input_file).to_owned());
         let agent = py.detach(|| start_agent(id, seed.as_deref(), rtps, join_wait)).map_err(PyRuntimeError::new_err)?;
         LOCAL_AGENT_ID.store(id, Ordering::Relaxed);
+        // pydsr accepts in `Node(...)`/`Edge(...)` the types its graph's file declared: so do we.
+        let types: Vec<(bool, String)> = py.detach(|| {
+            agent
+                .read(|r| {
+                    let nodes = r.nodes().map(|n| (true, n.node_type().to_owned()));
+                    nodes.chain(r.edges().map(|e| (false, e.edge_type().to_owned()))).collect()
+                })
+                .unwrap_or_default()
+        });
+        for (is_node, name) in types {
+            crate::objects::learn_type(is_node, &name);
+        }
         Ok(DsrGraph { agent: Some(agent), hub: Arc::new(SignalHub::default()), agent_name: name })
     }
 
@@ -555,12 +567,25 @@ impl DsrGraph {
         self.agent_name.clone()
     }
 
-    /// Stops the signal dispatcher and the agent (also done when the object is collected).
+    /// Stops the signal dispatcher and the agent and drops the callbacks (also done when the object is
+    /// collected).
     fn close(&mut self, py: Python<'_>) {
         self.hub.stop();
+        self.hub.clear_callbacks();
         if let Some(agent) = self.agent.take() {
             py.detach(move || agent.shutdown());
         }
+    }
+
+    /// Shows Python's garbage collector the callbacks this graph holds: a callback that refers to the graph (the
+    /// usual `lambda id, t: g.get_node(id)`) makes a cycle the collector can then break.
+    fn __traverse__(&self, visit: pyo3::PyVisit<'_>) -> Result<(), pyo3::PyTraverseError> {
+        self.hub.traverse(&visit)
+    }
+
+    fn __clear__(&mut self) {
+        self.hub.stop();
+        self.hub.clear_callbacks();
     }
 
     fn __enter__(slf: Py<Self>) -> Py<Self> {

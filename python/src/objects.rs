@@ -6,7 +6,8 @@
 //! it holds, so a change through `attrs[k]` changes the mapping's entry; storing (`attrs[k] = a`) stores a copy,
 //! as pydsr's `std::map` does.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -242,13 +243,29 @@ pub struct Edge {
     pub attrs: Py<AttrMap>,
 }
 
-/// Refuses a node or edge type outside the built-in ones, as pydsr's constructors do.
-fn check_type(what: &str, name: &str, known: &[&str]) -> PyResult<()> {
-    if known.contains(&name) {
-        Ok(())
-    } else {
-        Err(PyRuntimeError::new_err(format!("Error, \"{name}\" is not a valid {what} type")))
+/// Node and edge types met in the graphs of this process beyond the built-in ones (a CORTEX file may bring its
+/// own), so that `Node(...)` and `Edge(...)` accept every type a graph of the process holds.
+static GRAPH_TYPES: Mutex<BTreeSet<(bool, String)>> = Mutex::new(BTreeSet::new());
+
+/// Records a node (`is_node`) or edge type that a graph holds.
+pub fn learn_type(is_node: bool, name: &str) {
+    let known = if is_node { BUILTIN_NODE_TYPES } else { BUILTIN_EDGE_TYPES };
+    if !known.contains(&name) {
+        GRAPH_TYPES.lock().unwrap_or_else(|p| p.into_inner()).insert((is_node, name.to_owned()));
     }
+}
+
+/// Refuses a node or edge type that is neither built in nor held by a graph of this process, as pydsr's
+/// constructors refuse unregistered types.
+fn check_type(is_node: bool, name: &str) -> PyResult<()> {
+    let known = if is_node { BUILTIN_NODE_TYPES } else { BUILTIN_EDGE_TYPES };
+    if known.contains(&name)
+        || GRAPH_TYPES.lock().unwrap_or_else(|p| p.into_inner()).contains(&(is_node, name.to_owned()))
+    {
+        return Ok(());
+    }
+    let what = if is_node { "node" } else { "edge" };
+    Err(PyRuntimeError::new_err(format!("Error, \"{name}\" is not a valid {what} type")))
 }
 
 impl Edge {
@@ -275,7 +292,7 @@ impl Edge {
     #[new]
     #[pyo3(signature = (to, r#from, r#type, agent_id))]
     fn py_new(py: Python<'_>, to: u64, r#from: u64, r#type: String, agent_id: u32) -> PyResult<Self> {
-        check_type("edge", &r#type, BUILTIN_EDGE_TYPES)?;
+        check_type(false, &r#type)?;
         Edge::build(py, r#from, to, r#type, agent_id, AttrMap::default())
     }
 
@@ -403,7 +420,7 @@ impl Node {
     #[new]
     #[pyo3(signature = (agent_id, r#type, name = String::new()))]
     fn py_new(py: Python<'_>, agent_id: u32, r#type: String, name: String) -> PyResult<Self> {
-        check_type("node", &r#type, BUILTIN_NODE_TYPES)?;
+        check_type(true, &r#type)?;
         Node::build(py, 0, r#type, name, agent_id, AttrMap::default(), EdgeMap::default())
     }
 

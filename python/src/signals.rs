@@ -178,6 +178,23 @@ pub struct SignalHub {
 }
 
 impl SignalHub {
+    /// Drops every callback (the caller holds the GIL).
+    pub fn clear_callbacks(&self) {
+        let callbacks = std::mem::take(&mut *self.callbacks.lock().unwrap_or_else(|p| p.into_inner()));
+        drop(callbacks);
+    }
+
+    /// Visits the callbacks for Python's garbage collector; skips them if the list is busy (the dispatcher is
+    /// copying it), as a traversal must not block.
+    pub fn traverse(&self, visit: &pyo3::PyVisit<'_>) -> Result<(), pyo3::PyTraverseError> {
+        if let Ok(callbacks) = self.callbacks.try_lock() {
+            for (_, callback) in callbacks.iter() {
+                visit.call(callback)?;
+            }
+        }
+        Ok(())
+    }
+
     /// Asks the dispatcher to stop (it ends within its 50 ms poll).
     pub fn stop(&self) {
         self.stop.store(true, Ordering::SeqCst);

@@ -133,5 +133,21 @@ class CallbacksAndTheGraph(SignalCase):
             signals.connect(self.g, 3, lambda *a: None)
 
 
+class Lifetime(unittest.TestCase):
+    def test_a_graph_whose_callback_refers_to_it_is_collected(self):
+        import gc
+        import weakref
+        fixture = support.Fixture()
+        try:
+            g = support.new_graph(fixture.path)
+            signals.connect(g, signals.UPDATE_NODE, lambda node_id, node_type: g.get_node(node_id))
+            alive = weakref.ref(g)
+            del g
+            gc.collect()
+            self.assertIsNone(alive(), "the graph ↔ callback cycle was collected")
+        finally:
+            fixture.remove()
+
+
 if __name__ == "__main__":
     unittest.main()
