@@ -14,7 +14,7 @@ use agent::{Agent, AgentConfig, AgentId};
 use dsr::{EdgeKey, EdgeRef, Element, NewNode, NodeId, NodeRef, OpError, Replica, Value};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::{PyInt, PyString};
+use pyo3::types::PyString;
 use transport::SystemClock;
 use transport::rtps::{RtpsConfig, RtpsTransport};
 
@@ -160,12 +160,15 @@ impl NodeRefArg {
         if let Ok(name) = object.cast::<PyString>() {
             return Ok(NodeRefArg::Name(name.to_str()?.to_owned()));
         }
-        if object.is_instance_of::<PyInt>() {
-            return Ok(NodeRefArg::Id(NodeId(object.extract()?)));
+        // Any integer, numpy's included (`__index__`); not a float.
+        if !object.is_instance_of::<pyo3::types::PyFloat>()
+            && let Ok(id) = object.extract::<u64>()
+        {
+            return Ok(NodeRefArg::Id(NodeId(id)));
         }
         Err(PyTypeError::new_err(format!(
-            "a node is given by its id (int) or its name (str), not {}",
-            object.get_type()
+            "a node is given by its id (an int from 0 to 2^64-1) or its name (str), not {}",
+            object.repr().map_or_else(|_| "this".to_owned(), |r| r.to_string())
         )))
     }
 

@@ -204,6 +204,9 @@ class GraphReads(GraphCase):
         self.assertIsNone(self.g.get_node("weirdname"))
         with self.assertRaises(TypeError):
             self.g.get_node(1.5)
+        with self.assertRaises(TypeError):
+            self.g.get_node(-1)
+        self.assertEqual(self.g.get_node(np.uint64(2)).name, "robot")
 
     def test_a_node_copy_lists_its_outgoing_edges(self):
         robot = self.g.get_node("robot")
