@@ -107,7 +107,9 @@ impl Event {
 }
 
 /// Turns a batch of changes into callback events: consecutive attribute changes of one element and kind become
-/// one event with every name. Node types are read from `agent` (the GIL is not held here).
+/// one event with every name, preceded, as in pydsr, by the element's `UPDATE_NODE` / `UPDATE_EDGE` (once per
+/// element in the batch: an insert's own signal stands for it). Node types are read from `agent` (the GIL is not
+/// held here).
 fn events(agent: &GraphAgent, batch: Vec<ChangeSignal>) -> Vec<Event> {
     let node_type = |id: NodeId| agent.read(|r| r.node(id).map(|n| n.node_type().to_owned())).flatten();
     let mut out: Vec<Event> = Vec::with_capacity(batch.len());
@@ -144,17 +146,33 @@ fn events(agent: &GraphAgent, batch: Vec<ChangeSignal>) -> Vec<Event> {
                 if grouped {
                     continue;
                 }
+                // pydsr signals the element's update with its attribute update (`update_node_signal` and
+                // `update_node_attr_signal`, likewise for edges): once per element per dispatch round here.
                 match element {
-                    Element::Node(id) => Event::NodeAttrs {
-                        kind: if removed { SignalType::DeleteNodeAttr } else { SignalType::UpdateNodeAttr },
-                        id: id.0,
-                        names: vec![name],
-                    },
-                    Element::Edge(key) => Event::EdgeAttrs {
-                        kind: if removed { SignalType::DeleteEdgeAttr } else { SignalType::UpdateEdgeAttr },
-                        key,
-                        names: vec![name],
-                    },
+                    Element::Node(id) => {
+                        let announced = out.iter().any(|e| matches!(e, Event::Node { id: n, .. } if *n == id.0));
+                        if !announced && let Some(node_type) = node_type(id) {
+                            out.push(Event::Node { kind: SignalType::UpdateNode, id: id.0, node_type });
+                        }
+                        Event::NodeAttrs {
+                            kind: if removed { SignalType::DeleteNodeAttr } else { SignalType::UpdateNodeAttr },
+                            id: id.0,
+                            names: vec![name],
+                        }
+                    }
+                    Element::Edge(key) => {
+                        let announced = out
+                            .iter()
+                            .any(|e| matches!(e, Event::Edge { kind: SignalType::UpdateEdge, key: k } if *k == key));
+                        if !announced {
+                            out.push(Event::Edge { kind: SignalType::UpdateEdge, key: key.clone() });
+                        }
+                        Event::EdgeAttrs {
+                            kind: if removed { SignalType::DeleteEdgeAttr } else { SignalType::UpdateEdgeAttr },
+                            key,
+                            names: vec![name],
+                        }
+                    }
                 }
             }
         };

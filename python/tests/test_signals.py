@@ -51,6 +51,20 @@ class EachKindFires(SignalCase):
         node_id, names = self.next_call(signals.UPDATE_NODE_ATTR, lambda a: a[0] == 2)
         self.assertEqual(sorted(names), ["pos_x", "pos_y"])
 
+    def test_an_attribute_update_also_signals_update_node_as_pydsr_does(self):
+        self.record(signals.UPDATE_NODE)
+        robot = self.g.get_node("robot")
+        robot.attrs["pos_x"] = Attribute(1.0, 12)
+        self.assertTrue(self.g.update_node(robot))
+        self.assertEqual(self.next_call(signals.UPDATE_NODE), (2, "omnirobot"))
+
+    def test_an_edge_attribute_update_also_signals_update_edge(self):
+        self.record(signals.UPDATE_EDGE)
+        edge = self.g.get_edge(1, 2, "RT")
+        edge.attrs["rt_translation"] = Attribute([7.0, 0.0, 0.0], 12)
+        self.assertTrue(self.g.insert_or_assign_edge(edge))
+        self.assertEqual(self.next_call(signals.UPDATE_EDGE), (1, 2, "RT"))
+
     def test_update_edge_on_insert(self):
         self.record(signals.UPDATE_EDGE)
         self.assertTrue(self.g.insert_or_assign_edge(Edge(3, 1, "in", 12)))
