@@ -211,7 +211,14 @@ fn start_agent(id: u32, seed: Option<&Path>, rtps: RtpsConfig, join_wait: Durati
     config.join_wait = join_wait;
     if let Some(path) = seed {
         let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        config.seed = Some(dsr::json::parse_bytes(&bytes).map_err(|e| format!("{}: {e}", path.display()))?);
+        let graph = dsr::json::parse_bytes(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+        // The agent imports its seed only if no peer answers, and then only logs a refusal; check it now on a
+        // scratch replica (the agent's own kind: `Replica::new`, the built-in dictionary) so that a file the graph
+        // would refuse raises here, as pydsr raises for a bad file, instead of leaving an empty graph.
+        graph
+            .import_into(&mut Replica::new(dsr::ReplicaId(1)), 0)
+            .map_err(|e| format!("{} cannot seed the graph: {e}", path.display()))?;
+        config.seed = Some(graph);
     }
     let transport = RtpsTransport::new(rtps).map_err(|e| format!("cannot join the DDS domain: {e}"))?;
     let agent = Agent::start(config, transport, Arc::new(SystemClock)).map_err(|e| e.to_string())?;

@@ -359,6 +359,21 @@ class GraphStart(unittest.TestCase):
         with self.assertRaises(RuntimeError):
             support.new_graph("/nonexistent/graph.json")
 
+    def test_a_file_the_graph_refuses_raises_runtime_error_naming_the_place(self):
+        import json
+        import tempfile
+        graph = support.fixture_graph()
+        graph["DSRModel"]["symbols"]["203"]["links"] = [support.rt_link(203, 999, [0, 0, 0], [0, 0, 0])]
+        with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
+            json.dump(graph, f)
+        try:
+            with self.assertRaises(RuntimeError) as raised:
+                support.new_graph(f.name)
+            self.assertIn("cannot seed the graph", str(raised.exception))
+            self.assertIn("999", str(raised.exception))
+        finally:
+            os.unlink(f.name)
+
     def test_an_agent_id_out_of_range_raises_runtime_error(self):
         with self.assertRaises(RuntimeError):
             support.new_graph("", agent_id=5000)
