@@ -470,6 +470,40 @@ class InnerApi(GraphCase):
         np.testing.assert_allclose(inner.transform("root", "laser"), [1000.0, 0.0, 500.0])
 
 
+class Concurrency(unittest.TestCase):
+    def test_other_python_threads_run_while_a_graph_waits_for_its_join(self):
+        import threading
+        ticks = []
+        stop = threading.Event()
+
+        def ticker():
+            while not stop.is_set():
+                ticks.append(1)
+                stop.wait(0.005)
+
+        thread = threading.Thread(target=ticker)
+        thread.start()
+        try:
+            before = len(ticks)
+            g = support.new_graph("", join_wait_ms=500)  # waits 500 ms for a peer, the GIL released
+            during = len(ticks) - before
+            g.close()
+        finally:
+            stop.set()
+            thread.join()
+        self.assertGreater(during, 10, "the ticker thread ran while DSRGraph() waited")
+
+    def test_reprs_describe_the_objects(self):
+        n = Node(1, "root", "described")
+        n.attrs["pos_x"] = Attribute(1.0, 1)
+        n.edges[(2, "RT")] = Edge(2, 0, "RT", 1)
+        text = repr(n)
+        self.assertIn("described", text)
+        self.assertIn("pos_x", text)
+        self.assertIn("Edge type: RT", text)
+        self.assertIn("RT", repr(Edge(2, 1, "RT", 0)))
+
+
 class Module(unittest.TestCase):
     def test_star_import_names(self):
         for name in ("Attribute", "Node", "Edge", "DSRGraph", "rt_api", "inner_api", "signals"):
