@@ -239,7 +239,8 @@ pub struct Edge {
     /// The agent of the last write.
     #[pyo3(get, set)]
     pub agent_id: u32,
-    /// Its attributes.
+    /// Its attributes (a live mapping: changes to it change this object).
+    #[pyo3(get)]
     pub attrs: Py<AttrMap>,
 }
 
@@ -312,12 +313,6 @@ impl Edge {
     #[getter]
     fn destination(&self) -> u64 {
         self.to
-    }
-
-    /// The attribute map (a live mapping: changes to it change this edge).
-    #[getter]
-    fn get_attrs(&self, py: Python<'_>) -> Py<AttrMap> {
-        self.attrs.clone_ref(py)
     }
 
     #[setter]
@@ -394,9 +389,11 @@ pub struct Node {
     /// The agent of the last write.
     #[pyo3(get, set)]
     pub agent_id: u32,
-    /// Its attributes.
+    /// Its attributes (a live mapping: changes to it change this object).
+    #[pyo3(get)]
     pub attrs: Py<AttrMap>,
-    /// Its outgoing edges.
+    /// Its outgoing edges, keyed by `(to, type)` (a live mapping).
+    #[pyo3(get)]
     pub edges: Py<EdgeMap>,
 }
 
@@ -442,22 +439,10 @@ impl Node {
         &self.node_type
     }
 
-    /// The attribute map (a live mapping: changes to it change this node).
-    #[getter]
-    fn get_attrs(&self, py: Python<'_>) -> Py<AttrMap> {
-        self.attrs.clone_ref(py)
-    }
-
     #[setter]
     fn set_attrs(&mut self, py: Python<'_>, attrs: &Bound<'_, PyAny>) -> PyResult<()> {
         self.attrs = Py::new(py, AttrMap::from_mapping(py, attrs)?)?;
         Ok(())
-    }
-
-    /// The outgoing edges, keyed by `(to, type)` (a live mapping).
-    #[getter]
-    fn get_edges(&self, py: Python<'_>) -> Py<EdgeMap> {
-        self.edges.clone_ref(py)
     }
 
     #[setter]
