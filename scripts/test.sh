@@ -20,6 +20,10 @@ if [ "$(id -u)" = 0 ]; then
 else
   echo "note: not root: the chaos campaign's test does not run (it needs network namespaces and nftables)" >&2
 fi
+# The Python module `cortex_dsr` (python/): installs python3-venv if needed (pyo3's build script, in the workspace
+# build too, asks python3 for its version), builds the module with maturin into a venv under the target directory
+# and the `cortex` binary, and runs the Python tests, including a Python agent beside `cortex agent` processes.
+bash scripts/test-python.sh
 cargo test --workspace --all-targets
 # The RTPS tests once more in a fresh network namespace whose loopback is multicast-capable, where
 # `RtpsConfig::multicast` (default `Auto`) turns multicast on (two participants per transport, one datagram for all

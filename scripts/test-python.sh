@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# The Python module's part of the test command (scripts/test.sh runs it; it also runs alone): builds `cortex_dsr`
+# into a virtual environment under the cargo target directory with maturin, builds the `cortex` binary for the
+# two-process test, and runs the Python tests (plain unittest). As root on a machine without Python's venv module,
+# installs it first with apt.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+target="${CARGO_TARGET_DIR:-$PWD/target}"
+venv="$target/python-venv"
+if ! command -v python3 >/dev/null || ! python3 -c 'import venv, ensurepip' 2>/dev/null; then
+  if [ "$(id -u)" = 0 ]; then
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3 python3-venv python3-pip) >/dev/null
+  else
+    echo "error: python3 with its venv module is needed (Debian: apt-get install python3-venv)" >&2
+    exit 1
+  fi
+fi
+if [ ! -x "$venv/bin/python" ]; then
+  python3 -m venv "$venv"
+fi
+"$venv/bin/python" -m pip install -q --disable-pip-version-check "maturin>=1.9,<2" "numpy>=1.21"
+cargo build -q -p harness --bin cortex
+# A debug build, installed into the venv (README: `pip install ./python` builds the release wheel instead).
+VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop -q --manifest-path python/Cargo.toml
+CARGO_TARGET_DIR="$target" "$venv/bin/python" -m unittest discover -s python/tests -t python/tests -v
