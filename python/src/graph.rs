@@ -211,14 +211,21 @@ fn start_agent(id: u32, seed: Option<&Path>, rtps: RtpsConfig, join_wait: Durati
     config.join_wait = join_wait;
     if let Some(path) = seed {
         let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        let graph = dsr::json::parse_bytes(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+        // Read leniently, as `cortex agent` and the C++ loader do (`dsr::json` states the rules); what was
+        // converted, skipped or learnt is printed on standard error with its place in the file.
+        let reading =
+            dsr::json::read(&bytes, dsr::json::Strictness::Lenient).map_err(|e| format!("{}: {e}", path.display()))?;
         // The agent imports its seed only if no peer answers, and then only logs a refusal; check it now on a
         // scratch replica (the agent's own kind: `Replica::new`, the built-in dictionary) so that a file the graph
         // would refuse raises here, as pydsr raises for a bad file, instead of leaving an empty graph.
-        graph
+        let report = reading
+            .graph
             .import_into(&mut Replica::new(dsr::ReplicaId(1)), 0)
             .map_err(|e| format!("{} cannot seed the graph: {e}", path.display()))?;
-        config.seed = Some(graph);
+        for warning in reading.warnings.iter().chain(&report.warnings) {
+            eprintln!("warning: {}: {warning}", path.display());
+        }
+        config.seed = Some(reading.graph);
     }
     let transport = RtpsTransport::new(rtps).map_err(|e| format!("cannot join the DDS domain: {e}"))?;
     let agent = Agent::start(config, transport, Arc::new(SystemClock)).map_err(|e| e.to_string())?;
@@ -280,6 +287,19 @@ impl DsrGraph {
         copies.into_iter().map(|c| edge_object(py, c)).collect()
     }
 
+    /// Registers the attribute names of `attrs` the graph's dictionary does not know yet, each with the type of its
+    /// first value, as pydsr (the C++ API's run-time type check) does on a first write; a known name keeps its
+    /// types (another is refused by the write). Node and edge types are not registered: an unknown one is refused,
+    /// as in pydsr.
+    fn register_attr_names(replica: &mut Replica, attrs: &[(String, Value)]) -> Result<(), OpError> {
+        for (name, value) in attrs {
+            if replica.dictionary().attr_type(name).is_none() {
+                replica.dictionary_mut().learn_attr(name, value.value_type())?;
+            }
+        }
+        Ok(())
+    }
+
     /// Writes `attrs` to `element` where they differ from what it holds and removes the attributes it holds that
     /// `attrs` lacks: pydsr's update of a node or edge from its copy. `Ok(false)` if the element is not visible.
     fn sync_attrs(
@@ -305,6 +325,8 @@ impl DsrGraph {
             .map(|(name, value)| (name.as_str(), value.clone()))
             .collect();
         if !changed.is_empty() {
+            let new: Vec<(String, Value)> = changed.iter().map(|(n, v)| ((*n).to_owned(), v.clone())).collect();
+            Self::register_attr_names(replica, &new)?;
             deltas.push(replica.set_attrs(now, element.clone(), changed)?);
         }
         for (name, _) in current.iter().filter(|(k, _)| !attrs.iter().any(|(name, _)| name == k)) {
@@ -433,6 +455,10 @@ impl DsrGraph {
         };
         let generated = node.borrow().name.is_empty();
         let inserted = self.write(py, move |replica, now, deltas| {
+            Self::register_attr_names(replica, &new_node.attrs)?;
+            for (_, _, attrs) in &edges {
+                Self::register_attr_names(replica, attrs)?;
+            }
             let mut attempt = 0;
             let id = loop {
                 match replica.insert_node(now, new_node.clone()) {
@@ -515,6 +541,7 @@ impl DsrGraph {
             if replica.edge(&key).is_some() {
                 return Self::sync_attrs(replica, now, Element::Edge(key), attrs, deltas);
             }
+            Self::register_attr_names(replica, &attrs)?;
             let (_, delta) = replica.insert_edge(now, key.from, key.to, &key.edge_type, attrs)?;
             deltas.push(delta);
             Ok(true)

@@ -295,19 +295,20 @@ class GraphWrites(GraphCase):
         self.assertTrue(self.g.delete_node("table"))
         self.assertFalse(self.g.update_node(table))
 
-    def test_update_node_with_a_name_the_graph_refuses_raises_runtime_error_or_stores_it(self):
-        # The agent's dictionary is the built-in one, which refuses unknown attribute names (RuntimeError, with
-        # the graph unchanged); a dictionary that accepts unknown names stores it. Either way, nothing else.
+    def test_a_new_attribute_name_is_registered_with_its_first_type_and_another_type_refused(self):
+        # As pydsr: the first write of a name no dictionary knows registers it with that value's type; a later
+        # write of another type raises RuntimeError and leaves the graph unchanged.
         robot = self.g.get_node("robot")
         robot.attrs["an_attribute_no_dictionary_knows"] = Attribute(1.0, 12)
-        try:
-            stored = self.g.update_node(robot)
-        except RuntimeError as error:
-            self.assertIn("an_attribute_no_dictionary_knows", str(error))
-            self.assertNotIn("an_attribute_no_dictionary_knows", self.g.get_node("robot").attrs)
-        else:
-            self.assertTrue(stored)
-            self.assertIn("an_attribute_no_dictionary_knows", self.g.get_node("robot").attrs)
+        self.assertTrue(self.g.update_node(robot))
+        self.assertIn("an_attribute_no_dictionary_knows", self.g.get_node("robot").attrs)
+        robot = self.g.get_node("robot")
+        robot.attrs["an_attribute_no_dictionary_knows"] = Attribute("text", 12)
+        with self.assertRaises(RuntimeError) as raised:
+            self.g.update_node(robot)
+        self.assertIn("an_attribute_no_dictionary_knows", str(raised.exception))
+        stored = self.g.get_node("robot").attrs["an_attribute_no_dictionary_knows"].value
+        self.assertAlmostEqual(stored, 1.0)
 
     def test_delete_node_by_id_and_by_name(self):
         self.assertIsNotNone(self.g.get_node(1))
@@ -362,15 +363,18 @@ class GraphStart(unittest.TestCase):
     def test_a_file_the_graph_refuses_raises_runtime_error_naming_the_place(self):
         import json
         import tempfile
+        # Two symbols with one name: refused leniently too (a link to a missing node would only be skipped).
         graph = support.fixture_graph()
-        graph["DSRModel"]["symbols"]["203"]["links"] = [support.rt_link(203, 999, [0, 0, 0], [0, 0, 0])]
+        symbols = graph["DSRModel"]["symbols"]
+        taken = next(symbol["name"] for key, symbol in symbols.items() if key != "203")
+        symbols["203"]["name"] = taken
         with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
             json.dump(graph, f)
         try:
             with self.assertRaises(RuntimeError) as raised:
                 support.new_graph(f.name)
             self.assertIn("cannot seed the graph", str(raised.exception))
-            self.assertIn("999", str(raised.exception))
+            self.assertIn("already taken", str(raised.exception))
         finally:
             os.unlink(f.name)
 
