@@ -99,6 +99,19 @@ impl Setup {
         Setup { config, seed, cache: Arc::new(OracleCache::default()) }
     }
 
+    /// A fresh replica with the planted mutant, if any: the oracle's replicas run the same code as the model's, so
+    /// a deterministic bug is the specification's to find, and the fresh join checks only order independence.
+    fn fresh_replica(&self, id: ReplicaId) -> Replica {
+        let replica = Replica::new(id);
+        #[cfg(feature = "mutants")]
+        let replica = {
+            let mut replica = replica;
+            replica.plant_mutant(self.config.planted);
+            replica
+        };
+        replica
+    }
+
     /// The oracle for the operations `seen` (their deltas found among the issued ones).
     fn oracle(&self, state: &State, seen: &BTreeSet<OpId>) -> Arc<Oracle> {
         let issued: Vec<&Issued> = state
@@ -122,7 +135,7 @@ impl Setup {
 
     fn compute_oracle(&self, issued: &[&Issued]) -> Oracle {
         let join = |order: &mut dyn Iterator<Item = &&Issued>| -> Result<Replica, String> {
-            let mut fresh = Replica::new(ReplicaId(999));
+            let mut fresh = self.fresh_replica(ReplicaId(999));
             fresh.apply(&self.seed.snapshot).expect("the seed graph applies");
             for issued in order {
                 let delta = Delta::decode(&issued.bytes).map_err(|e| format!("{}: {e}", issued.record))?;
@@ -309,11 +322,7 @@ pub(super) fn late_join_problem(setup: &Setup, replica: &Replica, graph: &Visibl
         Ok(snapshot) => snapshot,
         Err(error) => return Some(format!("the snapshot does not decode: {error}")),
     };
-    let mut joiner = Replica::new(ReplicaId(998));
-    #[cfg(feature = "mutants")]
-    joiner.plant_mutant(setup.config.planted);
-    #[cfg(not(feature = "mutants"))]
-    let _ = setup;
+    let mut joiner = setup.fresh_replica(ReplicaId(998));
     if let Err(error) = joiner.apply(&snapshot) {
         return Some(format!("the snapshot is refused: {error}"));
     }
