@@ -55,8 +55,9 @@ pub mod properties;
 
 use properties::{
     Setup, change_events_complete, conflicts_happen, damaged_refused, equal_to_fresh_join, invariants_hold,
-    late_joiner_equals, matches_spec_everywhere, no_delta_refused, quiescent_end_reached, quiescent_replicas_converge,
-    quiescent_replicas_match_spec, same_ops_same_graph, snapshot_answered, stamps_follow_causality,
+    kinematics_agree, late_joiner_equals, matches_spec_everywhere, no_delta_refused, quiescent_end_reached,
+    quiescent_replicas_converge, quiescent_replicas_match_spec, rt_moved, same_ops_same_graph, snapshot_answered,
+    stamps_follow_causality,
 };
 
 /// How the network treats messages.
@@ -209,6 +210,8 @@ pub enum OpChoice {
     InsertRt(NodeId, NodeId),
     /// Delete an edge.
     DeleteEdge(EdgeKey),
+    /// Move the child of an `RT` edge: write the edge's translation (a value of this replica's own).
+    MoveRt(EdgeKey),
     /// Write the `level` attribute of a node or edge.
     SetLevel(Element),
     /// Remove the `level` attribute of a node or edge.
@@ -463,6 +466,9 @@ impl ReplicaActor {
         let edge = |from: NodeId, to: NodeId, edge_type: &str, menu: &mut Vec<OpChoice>| {
             let key = EdgeKey::new(from, to, edge_type);
             if r.edge(&key).is_some() {
+                if edge_type == RT {
+                    menu.push(OpChoice::MoveRt(key.clone()));
+                }
                 menu.push(OpChoice::DeleteEdge(key));
             } else if r.node(from).is_some() && r.node(to).is_some() {
                 menu.push(if edge_type == RT { OpChoice::InsertRt(from, to) } else { OpChoice::InsertEdge(from, to) });
@@ -548,6 +554,12 @@ impl ReplicaActor {
                 (delta, OpKind::InsertEdge { key, attrs })
             }
             OpChoice::DeleteEdge(key) => (r.delete_edge(now, key)?, OpKind::DeleteEdge { key: key.clone() }),
+            OpChoice::MoveRt(key) => {
+                let translation = Value::from(vec![(self.index as f32 + 1.0) * 100.0, f32::from(state.ops_done), 0.0]);
+                let delta = r.set_attrs(now, key, [(attrs::RT_TRANSLATION.name(), translation.clone())])?;
+                let name = Name::new(attrs::RT_TRANSLATION.name());
+                (delta, OpKind::SetAttr { element: Element::Edge(key.clone()), name, value: translation })
+            }
             OpChoice::SetLevel(element) => {
                 let delta = r.set_attrs(now, element.clone(), [(attrs::LEVEL.name(), level.clone())])?;
                 (delta, OpKind::SetAttr { element: element.clone(), name: name(), value: level })
@@ -775,10 +787,12 @@ impl Model for ConvergenceModel {
             Property::always(properties::SPEC_EVERY, matches_spec_everywhere),
             Property::always(properties::LATE_JOIN, late_joiner_equals),
             Property::always(properties::EVENTS, change_events_complete),
+            Property::always(properties::KINEMATICS, kinematics_agree),
             Property::always(properties::CONVERGE, quiescent_replicas_converge),
             Property::always(properties::SPEC, quiescent_replicas_match_spec),
             Property::sometimes(properties::CONFLICTS, conflicts_happen),
             Property::sometimes(properties::SNAPSHOT, snapshot_answered),
+            Property::sometimes(properties::RT_MOVED, rt_moved),
             Property::sometimes(properties::END, quiescent_end_reached),
         ]
     }
