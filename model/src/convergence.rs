@@ -6,7 +6,8 @@
 //! with an attribute (two dots; every replica uses the same name, so concurrent inserts conflict and one shows as
 //! `n#id`), delete `x` or any inserted node (the delete removes incident edges), insert and delete `in` edges
 //! between the seed nodes and between two inserted nodes, insert an `RT` edge from `x` to an inserted node with its
-//! translation and rotation (three dots) and delete it, write and remove `level` on seed and inserted elements.
+//! translation and rotation (three dots), move it (write its translation) and delete it, write and remove `level`
+//! on seed and inserted elements.
 //! `--ops K` is the total operation budget shared by all replicas (the checker decides who spends it). With
 //! `--ticks T` the checker may also advance a replica's physical clock (by [`TICK_NS`]), so clocks skew between
 //! replicas and hybrid-logical-clock stamps, not only counters, decide the winners; with `--syncs S` a replica may
@@ -27,8 +28,9 @@
 //! clock) and visible graph equal those of a fresh replica that joins the deltas of the operations it applied, in
 //! two orders, and that graph equals the reference specification's ([`crate::spec`]) for those operations; a fresh
 //! replica that installs a replica's snapshot equals it (the late join); every change event stream turns the
-//! previous visible graph into the current one; stamps follow causality; no delta is refused and no damaged one is
-//! accepted. The fresh replicas and the specification are computed once per set of deltas (a cache), since many
+//! previous visible graph into the current one; replicas that applied the same operations compute the same
+//! transforms ([`dsr::kinematics`]) between every two nodes, and each `RT` edge's transform is its shown translation
+//! and rotation; stamps follow causality; no delta is refused and no damaged one is accepted. The fresh replicas and the specification are computed once per set of deltas (a cache), since many
 //! states share one.
 //!
 //! Symmetry reduction does not apply: replica ids break ties between concurrent writes and name conflicts, so no

@@ -9,9 +9,17 @@
 //! component) are registered in the real core and activated at time 0; the shared dependency is registered
 //! too but is never in the active list: a parent's step calls it through
 //! `begin_step(dependency, now, Caller::Nested { parent })` before doing its own work, exactly as a BICA
-//! component steps what it reads first. One model transition is one iteration of the runtime's driver loop:
-//! ask [`SchedulerCore::next_decision`], then either run the decided top-level step (with its cascade) to its
-//! end or sleep to the decided release; or, between iterations, activate or deactivate a component.
+//! component steps what it reads first. One model transition is one iteration of the driver loop of
+//! `bica::runtime` (`run_once` and `run_forever`'s wait): ask [`SchedulerCore::next_decision`], then either run
+//! the decided top-level step (with its cascade) to its end or sleep to the decided release; or serve a remote
+//! request (an activation or deactivation), between iterations or halfway through a sleep, which the runtime's
+//! wait on its request queue cuts short.
+//!
+//! Every transition also tries the driver calls the core must refuse, on copies of the core, between steps (finish
+//! a step that is not running, start one the scheduler did not decide, a nested step without its parent, an
+//! unknown component) and during a step (decide, start another top-level step, change the active list, step the
+//! running component inside itself, finish one that is not running): each must return an error, never panic, and
+//! leave the core as it was.
 //!
 //! # How properties are checked
 //!
@@ -21,7 +29,9 @@
 //! records, in the new state, one bit per violated property (and a human-readable finding), and one bit per
 //! interesting fact observed (an overrun, a miss, ...). The `always` properties test those bits, so a
 //! counterexample ends exactly at the transition that broke the property; the `sometimes` properties show the
-//! model really reaches overruns, misses, deactivations and reactivations. The events and findings of the
+//! model really reaches overruns, misses, deactivations and reactivations, and the preconditions of the `always`
+//! ones that a step need not meet (a run a period after an overload ended, for recovery; a late run within the
+//! tolerance; a run later than one round; a nested step; a request during a sleep; an illegal call during a step). The events and findings of the
 //! last transition are kept for display only: they take no part in the state's identity.
 
 use std::fmt;
