@@ -1468,7 +1468,7 @@ pub struct SchedulerMutantCase {
     pub expected_property: &'static str,
 }
 
-/// The four scheduler mutants of `bica`, each planted in the default configuration.
+/// The five scheduler mutants of `bica`, each planted in the default configuration.
 #[cfg(feature = "mutants")]
 pub fn scheduler_mutants() -> Vec<SchedulerMutantCase> {
     let case = |name, mutant, check: Check| SchedulerMutantCase {
@@ -1485,5 +1485,6 @@ pub fn scheduler_mutants() -> Vec<SchedulerMutantCase> {
         ),
         case("scheduler-miss-off-by-one", SchedulerMutant::MissOffByOne, Check::MissExactness),
         case("scheduler-removed-stepped-once-more", SchedulerMutant::RemovedSteppedOnceMore, Check::QuietShutdown),
+        case("scheduler-finish-unmatched", SchedulerMutant::FinishUnmatched, Check::IllegalCallsRefused),
     ]
 }

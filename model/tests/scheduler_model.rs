@@ -69,6 +69,11 @@ mod mutants {
     fn removed_stepped_once_more_is_killed_by_quiet_shutdown() {
         assert_killed("scheduler-removed-stepped-once-more");
     }
+
+    #[test]
+    fn finish_unmatched_is_killed_by_illegal_calls_refused() {
+        assert_killed("scheduler-finish-unmatched");
+    }
 }
 
 #[test]
