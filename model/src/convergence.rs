@@ -6,7 +6,8 @@
 //! with an attribute (two dots; every replica uses the same name, so concurrent inserts conflict and one shows as
 //! `n#id`), delete `x` or any inserted node (the delete removes incident edges), insert and delete `in` edges
 //! between the seed nodes and between two inserted nodes, insert an `RT` edge from `x` to an inserted node with its
-//! translation and rotation (three dots) and delete it, write and remove `level` on seed and inserted elements.
+//! translation and rotation (three dots), move it (write its translation) and delete it, write and remove `level`
+//! on seed and inserted elements.
 //! `--ops K` is the total operation budget shared by all replicas (the checker decides who spends it). With
 //! `--ticks T` the checker may also advance a replica's physical clock (by [`TICK_NS`]), so clocks skew between
 //! replicas and hybrid-logical-clock stamps, not only counters, decide the winners; with `--syncs S` a replica may
@@ -27,8 +28,9 @@
 //! clock) and visible graph equal those of a fresh replica that joins the deltas of the operations it applied, in
 //! two orders, and that graph equals the reference specification's ([`crate::spec`]) for those operations; a fresh
 //! replica that installs a replica's snapshot equals it (the late join); every change event stream turns the
-//! previous visible graph into the current one; stamps follow causality; no delta is refused and no damaged one is
-//! accepted. The fresh replicas and the specification are computed once per set of deltas (a cache), since many
+//! previous visible graph into the current one; replicas that applied the same operations compute the same
+//! transforms ([`dsr::kinematics`]) between every two nodes, and each `RT` edge's transform is its shown translation
+//! and rotation; stamps follow causality; no delta is refused and no damaged one is accepted. The fresh replicas and the specification are computed once per set of deltas (a cache), since many
 //! states share one.
 //!
 //! Symmetry reduction does not apply: replica ids break ties between concurrent writes and name conflicts, so no
@@ -55,8 +57,9 @@ pub mod properties;
 
 use properties::{
     Setup, change_events_complete, conflicts_happen, damaged_refused, equal_to_fresh_join, invariants_hold,
-    late_joiner_equals, matches_spec_everywhere, no_delta_refused, quiescent_end_reached, quiescent_replicas_converge,
-    quiescent_replicas_match_spec, same_ops_same_graph, snapshot_answered, stamps_follow_causality,
+    kinematics_agree, late_joiner_equals, matches_spec_everywhere, no_delta_refused, quiescent_end_reached,
+    quiescent_replicas_converge, quiescent_replicas_match_spec, rt_moved, same_ops_same_graph, snapshot_answered,
+    stamps_follow_causality,
 };
 
 /// How the network treats messages.
@@ -209,6 +212,8 @@ pub enum OpChoice {
     InsertRt(NodeId, NodeId),
     /// Delete an edge.
     DeleteEdge(EdgeKey),
+    /// Move the child of an `RT` edge: write the edge's translation (a value of this replica's own).
+    MoveRt(EdgeKey),
     /// Write the `level` attribute of a node or edge.
     SetLevel(Element),
     /// Remove the `level` attribute of a node or edge.
@@ -463,6 +468,9 @@ impl ReplicaActor {
         let edge = |from: NodeId, to: NodeId, edge_type: &str, menu: &mut Vec<OpChoice>| {
             let key = EdgeKey::new(from, to, edge_type);
             if r.edge(&key).is_some() {
+                if edge_type == RT {
+                    menu.push(OpChoice::MoveRt(key.clone()));
+                }
                 menu.push(OpChoice::DeleteEdge(key));
             } else if r.node(from).is_some() && r.node(to).is_some() {
                 menu.push(if edge_type == RT { OpChoice::InsertRt(from, to) } else { OpChoice::InsertEdge(from, to) });
@@ -548,6 +556,12 @@ impl ReplicaActor {
                 (delta, OpKind::InsertEdge { key, attrs })
             }
             OpChoice::DeleteEdge(key) => (r.delete_edge(now, key)?, OpKind::DeleteEdge { key: key.clone() }),
+            OpChoice::MoveRt(key) => {
+                let translation = Value::from(vec![(self.index as f32 + 1.0) * 100.0, f32::from(state.ops_done), 0.0]);
+                let delta = r.set_attrs(now, key, [(attrs::RT_TRANSLATION.name(), translation.clone())])?;
+                let name = Name::new(attrs::RT_TRANSLATION.name());
+                (delta, OpKind::SetAttr { element: Element::Edge(key.clone()), name, value: translation })
+            }
             OpChoice::SetLevel(element) => {
                 let delta = r.set_attrs(now, element.clone(), [(attrs::LEVEL.name(), level.clone())])?;
                 (delta, OpKind::SetAttr { element: element.clone(), name: name(), value: level })
@@ -775,10 +789,12 @@ impl Model for ConvergenceModel {
             Property::always(properties::SPEC_EVERY, matches_spec_everywhere),
             Property::always(properties::LATE_JOIN, late_joiner_equals),
             Property::always(properties::EVENTS, change_events_complete),
+            Property::always(properties::KINEMATICS, kinematics_agree),
             Property::always(properties::CONVERGE, quiescent_replicas_converge),
             Property::always(properties::SPEC, quiescent_replicas_match_spec),
             Property::sometimes(properties::CONFLICTS, conflicts_happen),
             Property::sometimes(properties::SNAPSHOT, snapshot_answered),
+            Property::sometimes(properties::RT_MOVED, rt_moved),
             Property::sometimes(properties::END, quiescent_end_reached),
         ]
     }

@@ -58,6 +58,9 @@ pub fn dsr_mutant_configs() -> Vec<(DsrMutant, ConvergenceConfig)> {
                 DsrMutant::AntiEntropySkipsLastDelta => config(2, 1, NetworkKind::Lossy),
                 DsrMutant::RemoveLosesContext | DsrMutant::DeleteKeepsIncidentEdges => config(2, 1, nondup),
                 DsrMutant::TieBreakByArrival | DsrMutant::EdgeToDeletedNodeVisible => config(2, 2, nondup),
+                // Two concurrent writes of one attribute; two concurrent inserts of one name. Deterministic: only
+                // the specification can tell.
+                DsrMutant::WinnerLowestRank | DsrMutant::NameHeldByLatest => config(2, 2, nondup),
                 // A delete that hides an edge; a snapshot of a state with a tombstone; a node inserted with an
                 // attribute (its second dot).
                 DsrMutant::IncidentEdgeEventsMissing

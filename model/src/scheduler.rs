@@ -9,9 +9,17 @@
 //! component) are registered in the real core and activated at time 0; the shared dependency is registered
 //! too but is never in the active list: a parent's step calls it through
 //! `begin_step(dependency, now, Caller::Nested { parent })` before doing its own work, exactly as a BICA
-//! component steps what it reads first. One model transition is one iteration of the runtime's driver loop:
-//! ask [`SchedulerCore::next_decision`], then either run the decided top-level step (with its cascade) to its
-//! end or sleep to the decided release; or, between iterations, activate or deactivate a component.
+//! component steps what it reads first. One model transition is one iteration of the driver loop of
+//! `bica::runtime` (`run_once` and `run_forever`'s wait): ask [`SchedulerCore::next_decision`], then either run
+//! the decided top-level step (with its cascade) to its end or sleep to the decided release; or serve a remote
+//! request (an activation or deactivation), between iterations or halfway through a sleep, which the runtime's
+//! wait on its request queue cuts short.
+//!
+//! Every transition also tries the driver calls the core must refuse, on copies of the core, between steps (finish
+//! a step that is not running, start one the scheduler did not decide, a nested step without its parent, an
+//! unknown component) and during a step (decide, start another top-level step, change the active list, step the
+//! running component inside itself, finish one that is not running): each must return an error, never panic, and
+//! leave the core as it was.
 //!
 //! # How properties are checked
 //!
@@ -21,13 +29,16 @@
 //! records, in the new state, one bit per violated property (and a human-readable finding), and one bit per
 //! interesting fact observed (an overrun, a miss, ...). The `always` properties test those bits, so a
 //! counterexample ends exactly at the transition that broke the property; the `sometimes` properties show the
-//! model really reaches overruns, misses, deactivations and reactivations. The events and findings of the
+//! model really reaches overruns, misses, deactivations and reactivations, and the preconditions of the `always`
+//! ones that a step need not meet (a run a period after an overload ended, for recovery; a late run within the
+//! tolerance; a run later than one round; a nested step; a request during a sleep; an illegal call during a step). The events and findings of the
 //! last transition are kept for display only: they take no part in the state's identity.
 
 use std::fmt;
 use std::hash::{Hash, Hasher};
 use std::sync::Arc;
 
+use bica::BicaError;
 use bica::core::{ComponentCounters, ComponentId, Decision, Gate, SchedulerConfig, SchedulerCore};
 use bica::trace::{Caller, MissEvent, TraceEvent};
 use serde::{Deserialize, Serialize};
@@ -249,11 +260,15 @@ pub enum Check {
     ReactivationSignalled,
     /// Running a transition twice from the same state gives the same state and trace.
     Determinism,
+    /// Every illegal driver call (finishing a step that is not running, starting a step the scheduler did not
+    /// decide or while another runs, deciding or changing the list during a step, stepping a component inside
+    /// itself, an unknown component) is refused with an error and leaves the core as it was.
+    IllegalCallsRefused,
 }
 
 impl Check {
     /// Every `always` property, in report order.
-    pub const ALL: [Check; 13] = [
+    pub const ALL: [Check; 14] = [
         Check::NoOverlap,
         Check::NoCancellation,
         Check::CallsAccepted,
@@ -267,6 +282,7 @@ impl Check {
         Check::QuietShutdown,
         Check::ReactivationSignalled,
         Check::Determinism,
+        Check::IllegalCallsRefused,
     ];
 
     /// The property's name in reports.
@@ -285,6 +301,7 @@ impl Check {
             Check::QuietShutdown => "a removed component is never stepped again (quiet shutdown)",
             Check::ReactivationSignalled => "reactivation after a gap of more than k periods is signalled",
             Check::Determinism => "identical inputs give identical traces and states",
+            Check::IllegalCallsRefused => "illegal driver calls are refused with an error and change nothing",
         }
     }
 
@@ -310,11 +327,23 @@ pub enum Fact {
     Deactivation,
     /// A reactivation after a long gap was signalled.
     Reactivation,
+    /// A top-level run released a period or more after an overload ended (the precondition of `Recovery`).
+    RunAfterOverload,
+    /// A top-level run later than one round (the overrun term of `LatenessBound` at work).
+    LateBeyondRound,
+    /// A run late but within the tolerance, so no miss (the other side of `MissExactness`).
+    LateWithinTolerance,
+    /// A nested step ran inside its parent (the nested case of `NoOverlap`).
+    NestedStep,
+    /// A remote request (an activation or deactivation) woke the driver during a sleep.
+    RequestDuringSleep,
+    /// An illegal driver call was tried while a step was running (the in-step case of `IllegalCallsRefused`).
+    IllegalCallDuringStep,
 }
 
 impl Fact {
     /// Every fact, in report order.
-    pub const ALL: [Fact; 7] = [
+    pub const ALL: [Fact; 13] = [
         Fact::Overrun,
         Fact::SkippedRelease,
         Fact::Miss,
@@ -322,6 +351,12 @@ impl Fact {
         Fact::DependencyGatedSkip,
         Fact::Deactivation,
         Fact::Reactivation,
+        Fact::RunAfterOverload,
+        Fact::LateBeyondRound,
+        Fact::LateWithinTolerance,
+        Fact::NestedStep,
+        Fact::RequestDuringSleep,
+        Fact::IllegalCallDuringStep,
     ];
 
     /// The property's name in reports.
@@ -334,11 +369,17 @@ impl Fact {
             Fact::DependencyGatedSkip => "a second call of the shared dependency in a period is gated",
             Fact::Deactivation => "a component is deactivated",
             Fact::Reactivation => "a reactivation after a long gap is signalled",
+            Fact::RunAfterOverload => "a run is released a period after an overload ended",
+            Fact::LateBeyondRound => "a run is later than one round",
+            Fact::LateWithinTolerance => "a run is late within the tolerance",
+            Fact::NestedStep => "a nested step runs inside its parent",
+            Fact::RequestDuringSleep => "a remote request wakes the driver during a sleep",
+            Fact::IllegalCallDuringStep => "an illegal driver call is tried during a step",
         }
     }
 
-    const fn bit(self) -> u8 {
-        1 << self as u8
+    const fn bit(self) -> u16 {
+        1 << self as u16
     }
 }
 
@@ -415,7 +456,7 @@ pub struct SchedulerState {
     overload_end_ns: Option<u64>,
     list_changes: u8,
     violated: u16,
-    observed: u8,
+    observed: u16,
     // Display only: not part of the state's identity (see `Hash`/`PartialEq`).
     last_events: Vec<TraceEvent>,
     findings: Vec<String>,
@@ -465,7 +506,7 @@ impl SchedulerState {
 }
 
 /// The fields that make a state's identity (everything but the display-only ones).
-type Identity<'a> = (&'a SchedulerCore, u64, &'a [Reference], (u8, u64, Option<u64>, u8), (u16, u8));
+type Identity<'a> = (&'a SchedulerCore, u64, &'a [Reference], (u8, u64, Option<u64>, u8), (u16, u16));
 
 impl PartialEq for SchedulerState {
     fn eq(&self, other: &Self) -> bool {
@@ -625,7 +666,9 @@ impl SchedulerModel {
             .map(|i| next.core.counters(ComponentId(i as u32)).unwrap_or_default())
             .collect();
         let mut audit = Audit { model: self, violated: 0, observed: 0, findings: Vec::new() };
-        let now = state.now_ns;
+        audit.illegal_between_steps(&state.core, state.now_ns);
+        let now = self.serve_request_time(state, action, &mut audit);
+        next.now_ns = now;
         match action {
             SchedulerAction::Activate { component, .. } => {
                 next.list_changes += 1;
@@ -707,6 +750,19 @@ impl SchedulerModel {
         Some(next)
     }
 
+    /// The time an action happens: now, or, for a remote request that arrives while the driver sleeps, the
+    /// request's arrival (the runtime's loop wakes on its request queue and serves it at once).
+    fn serve_request_time(&self, state: &SchedulerState, action: SchedulerAction, audit: &mut Audit<'_>) -> u64 {
+        let at_ns = match action {
+            SchedulerAction::Activate { at_ns, .. } | SchedulerAction::Deactivate { at_ns, .. } => at_ns,
+            _ => return state.now_ns,
+        };
+        if at_ns > state.now_ns {
+            audit.observe(Fact::RequestDuringSleep);
+        }
+        at_ns
+    }
+
     /// Drives one top-level step (and its cascade) through the real core; returns its end time.
     fn run_step(
         &self,
@@ -726,7 +782,7 @@ impl SchedulerModel {
             }
         }
         match next.core.begin_step(id, now, Caller::TopLevel) {
-            Ok(Gate::Run(_)) => {}
+            Ok(Gate::Run(_)) => audit.illegal_during_step(&next.core, id, now),
             Ok(Gate::NotDue { next_release_ns }) => {
                 audit.fail(
                     Check::CallsAccepted,
@@ -806,6 +862,7 @@ impl SchedulerModel {
             always!(Check::QuietShutdown),
             always!(Check::ReactivationSignalled),
             always!(Check::Determinism),
+            always!(Check::IllegalCallsRefused),
             sometimes!(Fact::Overrun),
             sometimes!(Fact::SkippedRelease),
             sometimes!(Fact::Miss),
@@ -813,6 +870,12 @@ impl SchedulerModel {
             sometimes!(Fact::DependencyGatedSkip),
             sometimes!(Fact::Deactivation),
             sometimes!(Fact::Reactivation),
+            sometimes!(Fact::RunAfterOverload),
+            sometimes!(Fact::LateBeyondRound),
+            sometimes!(Fact::LateWithinTolerance),
+            sometimes!(Fact::NestedStep),
+            sometimes!(Fact::RequestDuringSleep),
+            sometimes!(Fact::IllegalCallDuringStep),
         ]
     }
 }
@@ -821,7 +884,7 @@ impl SchedulerModel {
 struct Audit<'a> {
     model: &'a SchedulerModel,
     violated: u16,
-    observed: u8,
+    observed: u16,
     findings: Vec<String>,
 }
 
@@ -833,6 +896,65 @@ impl Audit<'_> {
 
     fn observe(&mut self, fact: Fact) {
         self.observed |= fact.bit();
+    }
+
+    /// Tries an illegal driver call on a copy of `core`: it must be refused, and the copy left as it was.
+    fn try_illegal(
+        &mut self,
+        core: &SchedulerCore,
+        what: &str,
+        call: impl FnOnce(&mut SchedulerCore) -> Result<(), BicaError>,
+    ) {
+        let mut probe = core.clone();
+        let verdict = match call(&mut probe) {
+            Ok(()) => "accepted",
+            Err(_) if probe != *core => "refused, but it changed the core",
+            Err(_) => return,
+        };
+        self.fail(Check::IllegalCallsRefused, format!("{what}: {verdict}"));
+    }
+
+    /// The illegal calls a driver could make between two iterations of its loop (no step running at `now`).
+    fn illegal_between_steps(&mut self, core: &SchedulerCore, now: u64) {
+        let config = &self.model.config;
+        let first = ComponentId(0);
+        let unknown = ComponentId(config.registered() as u32);
+        let dependency = config.dependency_id();
+        self.try_illegal(core, "finish_step with no step running", |c| c.finish_step(first, now));
+        self.try_illegal(core, "begin_step of an unknown component", |c| {
+            c.begin_step(unknown, now, Caller::TopLevel).map(drop)
+        });
+        self.try_illegal(core, "a nested begin_step whose parent is not running", |c| {
+            c.begin_step(dependency, now, Caller::Nested { parent: first }).map(drop)
+        });
+        // A top-level step the scheduler did not decide (after a decision, so the cursor is where it would be).
+        let mut decided = core.clone();
+        let chosen = match decided.next_decision(now) {
+            Ok(Decision::Step(id)) => Some(id),
+            _ => None,
+        };
+        let other = (0..config.components.len() as u32).map(ComponentId).find(|&id| Some(id) != chosen);
+        if let Some(other) = other {
+            self.try_illegal(&decided, "a top-level begin_step the scheduler did not decide", |c| {
+                c.begin_step(other, now, Caller::TopLevel).map(drop)
+            });
+        }
+    }
+
+    /// The illegal calls a driver could make while the top-level step of `running` runs, at `now`.
+    fn illegal_during_step(&mut self, core: &SchedulerCore, running: ComponentId, now: u64) {
+        self.observe(Fact::IllegalCallDuringStep);
+        let dependency = self.model.config.dependency_id();
+        self.try_illegal(core, "next_decision during a step", |c| c.next_decision(now).map(drop));
+        self.try_illegal(core, "a second top-level begin_step during a step", |c| {
+            c.begin_step(running, now, Caller::TopLevel).map(drop)
+        });
+        self.try_illegal(core, "activate during a step", |c| c.activate(running, now));
+        self.try_illegal(core, "deactivate during a step", |c| c.deactivate(running, now));
+        self.try_illegal(core, "a step of the running component inside itself", |c| {
+            c.begin_step(running, now, Caller::Nested { parent: running }).map(drop)
+        });
+        self.try_illegal(core, "finish_step of a component that is not running", |c| c.finish_step(dependency, now));
     }
 
     fn name(&self, id: ComponentId) -> String {
@@ -881,6 +1003,9 @@ impl Audit<'_> {
                     }
                     if stack.iter().any(|s| s.0 == component) {
                         self.fail(Check::NoOverlap, format!("{name} starts inside its own step"));
+                    }
+                    if matches!(caller, Caller::Nested { .. }) {
+                        self.observe(Fact::NestedStep);
                     }
                     stack.push((component, at_ns));
                     // Quiet shutdown.
@@ -964,8 +1089,15 @@ impl Audit<'_> {
                                 ),
                             );
                         }
+                        if lateness_ns > round {
+                            self.observe(Fact::LateBeyondRound);
+                        }
+                        let after_overload = previous.overload_end_ns.is_some_and(|end| release_ns >= end + period);
+                        if after_overload {
+                            self.observe(Fact::RunAfterOverload);
+                        }
                         if let Some(end) = previous.overload_end_ns
-                            && release_ns >= end + period
+                            && after_overload
                             && (lateness_ns > round || skipped_periods > 0)
                         {
                             self.fail(
@@ -984,6 +1116,9 @@ impl Audit<'_> {
                     }
                     // Miss exactness, both directions, with the run's values.
                     let late = lateness_ns > tolerance;
+                    if lateness_ns > 0 && !late {
+                        self.observe(Fact::LateWithinTolerance);
+                    }
                     match pending_miss.take() {
                         Some(miss) => {
                             self.observe(Fact::Miss);
@@ -1190,6 +1325,22 @@ fn caller_name(audit: &Audit<'_>, caller: Caller) -> String {
     }
 }
 
+impl SchedulerModel {
+    /// The list changes (remote activation and deactivation requests) the checker may inject at `at_ns`.
+    fn list_changes(&self, state: &SchedulerState, at_ns: u64, actions: &mut Vec<SchedulerAction>) {
+        if state.list_changes >= self.config.max_list_changes {
+            return;
+        }
+        for (component, reference) in state.reference.iter().enumerate().take(self.config.components.len()) {
+            actions.push(if reference.active {
+                SchedulerAction::Deactivate { at_ns, component }
+            } else {
+                SchedulerAction::Activate { at_ns, component }
+            });
+        }
+    }
+}
+
 impl Model for SchedulerModel {
     type State = SchedulerState;
     type Action = SchedulerAction;
@@ -1223,18 +1374,17 @@ impl Model for SchedulerModel {
                     }
                 }
             }
-            Ok(Decision::SleepUntil(until_ns)) => actions.push(SchedulerAction::Sleep { from_ns: now, until_ns }),
+            Ok(Decision::SleepUntil(until_ns)) => {
+                actions.push(SchedulerAction::Sleep { from_ns: now, until_ns });
+                // A remote request arriving halfway through the sleep wakes the driver, which serves it then.
+                let halfway = now + (until_ns - now) / 2;
+                if halfway > now {
+                    self.list_changes(state, halfway, actions);
+                }
+            }
             Ok(Decision::Idle) | Err(_) => {}
         }
-        if state.list_changes < self.config.max_list_changes {
-            for (component, reference) in state.reference.iter().enumerate().take(self.config.components.len()) {
-                actions.push(if reference.active {
-                    SchedulerAction::Deactivate { at_ns: now, component }
-                } else {
-                    SchedulerAction::Activate { at_ns: now, component }
-                });
-            }
-        }
+        self.list_changes(state, now, actions);
     }
 
     fn next_state(&self, state: &SchedulerState, action: SchedulerAction) -> Option<SchedulerState> {
@@ -1318,7 +1468,7 @@ pub struct SchedulerMutantCase {
     pub expected_property: &'static str,
 }
 
-/// The four scheduler mutants of `bica`, each planted in the default configuration.
+/// The five scheduler mutants of `bica`, each planted in the default configuration.
 #[cfg(feature = "mutants")]
 pub fn scheduler_mutants() -> Vec<SchedulerMutantCase> {
     let case = |name, mutant, check: Check| SchedulerMutantCase {
@@ -1335,5 +1485,6 @@ pub fn scheduler_mutants() -> Vec<SchedulerMutantCase> {
         ),
         case("scheduler-miss-off-by-one", SchedulerMutant::MissOffByOne, Check::MissExactness),
         case("scheduler-removed-stepped-once-more", SchedulerMutant::RemovedSteppedOnceMore, Check::QuietShutdown),
+        case("scheduler-finish-unmatched", SchedulerMutant::FinishUnmatched, Check::IllegalCallsRefused),
     ]
 }

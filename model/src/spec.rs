@@ -1,25 +1,39 @@
 //! The reference specification of the DSR graph: what the visible graph must be, computed from the set of
 //! operations and their causal order alone.
 //!
-//! It is written as the simplest, obviously correct reading of the semantics in the `dsr` crate documentation — no
-//! deltas, no dots, no causal contexts, no joins — so that a bug shared by the implementation and the specification
-//! is unlikely. An operation *saw* another if its replica had applied the other's delta when it issued it (directly:
-//! deltas are not delivered causally, so seeing an operation does not mean seeing everything it saw). Then:
+//! It is written from the semantics in the `dsr` crate documentation (its "Specification" section), not from the
+//! replica's code: no deltas, dots, causal contexts, joins or indices, so that a bug shared by the implementation and
+//! the specification is unlikely. Two relations between operations carry it:
 //!
-//! - a node is visible iff it was inserted and no operation deleted it;
-//! - an edge is visible iff some insert of it was not seen by a delete of it, and both endpoints are visible;
-//! - an attribute write is live iff no later write or removal of the same attribute (nor, for edges, a delete or a
-//!   re-insert of the edge) saw it; the shown value is the live write with the highest (stamp, replica);
-//! - among visible nodes sharing a name, the earliest (insert stamp, id) keeps it and the others are `name#id`.
+//! - *applied*: `b` is in `a`'s recorded past when `a`'s replica had joined `b`'s delta before issuing `a`. This is
+//!   what the docs call "seen" for the observed-remove rules (a write supersedes, a removal or delete removes, the
+//!   values and inserts its replica has seen), because the replica does not deliver causally;
+//! - *happens-before* ([`CausalOrder`]): the transitive closure of *applied*, the causal order of the operations.
+//!   The docs' ordering rules are stated with it: a register's winner is its causally latest value, and a shared
+//!   name is held by the causally first insert; only operations concurrent in this order fall back to the documented
+//!   tie-breaks, (stamp, replica id, counter) for values and (insert stamp, id) for names.
 //!
-//! The replica does not deliver causally (see the `dsr` crate docs), so a replica that has applied an operation
-//! without one its writer had seen may show what this specification does not (an overwritten value beside its
-//! overwrite). The convergence model therefore compares a replica with this specification when its applied
-//! operations are causally closed (each one's past among them), and at quiescence, where all are.
+//! Then:
 //!
-//! Because stamps follow causality transitively (each replica's hybrid logical clock moves past every delta it
-//! applies), the shown value of a register is always the causally latest write; a write that was only seen through a
-//! third replica's unrelated operation may stay listed among the concurrent values beside it.
+//! - a node is visible iff it was inserted and no operation deleted it (remove wins);
+//! - an edge is visible iff some insert of it was not applied by a delete of it (add wins), and both endpoints are
+//!   visible;
+//! - a register keeps the writes that no write or removal of the same attribute (nor, for an edge, a delete or a
+//!   re-insert of the edge) had applied; it shows the causally latest of them, or among concurrent latest ones the
+//!   highest (stamp, replica id, counter);
+//! - among visible nodes inserted with one name, the causally first insert shows the plain name, or among concurrent
+//!   first ones the lowest (insert stamp, id); the others show `name#id`.
+//!
+//! The implementation picks the highest (stamp, replica id, counter) among all kept values and the lowest (insert
+//! stamp, id) among all holders, which agrees with this only because stamps follow causality; the comparison checks
+//! that too.
+//!
+//! Since "seen" means applied, a replica that has applied an operation without one its writer had seen may show what
+//! this specification does not (an overwritten value beside its overwrite). The convergence model therefore compares
+//! a replica with this specification when its applied operations are causally closed (each one's past among them),
+//! and at quiescence, where all are. Happens-before cannot replace *applied* in the supersession rules: a write that
+//! reached a replica only through a third replica's unrelated operation stays among the concurrent values for good
+//! (the docs say so), which a happens-before reading would drop.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -167,19 +181,31 @@ struct Write<'a> {
     value: Value,
 }
 
-/// Whether operation `later` ends write `write` (given that `later` saw it).
-fn supersedes(later: &OpKind, write: &Write<'_>) -> bool {
-    match later {
+impl Write<'_> {
+    /// The documented tie-break among concurrent values: the highest (stamp, replica id, counter) wins.
+    fn rank(&self) -> (Stamp, ReplicaId, u64) {
+        (self.op.stamp, self.op.replica, self.op.id.counter)
+    }
+}
+
+/// Whether `later` ends `write` when its replica had applied it: a write or removal of the same attribute, or, for
+/// an edge's attribute, a delete or a re-insert of the edge (which gives it exactly the attributes it carries).
+fn supersedes(later: &OpRecord, write: &Write<'_>) -> bool {
+    let ends = match &later.kind {
         OpKind::SetAttr { element, name, .. } | OpKind::RemoveAttr { element, name } => {
             *element == write.element && *name == write.name
         }
         OpKind::DeleteEdge { key } | OpKind::InsertEdge { key, .. } => write.element == Element::Edge(key.clone()),
         OpKind::InsertNode { .. } | OpKind::DeleteNode { .. } => false,
-    }
+    };
+    ends && later.past.contains(&write.op.id)
 }
 
-/// The visible graph the specification requires after all of `ops` have been applied.
-pub fn visible_graph(ops: &[OpRecord]) -> VisibleGraph {
+/// A visible node: the insert that made it, its type and its inserted name.
+type Inserted<'a> = (&'a OpRecord, &'a Name, &'a Name);
+
+/// The nodes the docs make visible: inserted, and deleted by no operation (remove wins, forever).
+fn visible_nodes(ops: &[OpRecord]) -> BTreeMap<NodeId, Inserted<'_>> {
     let deleted: BTreeSet<NodeId> = ops
         .iter()
         .filter_map(|op| match op.kind {
@@ -187,87 +213,108 @@ pub fn visible_graph(ops: &[OpRecord]) -> VisibleGraph {
             _ => None,
         })
         .collect();
-    let mut nodes: BTreeMap<NodeId, (&OpRecord, &Name, &Name)> = BTreeMap::new();
-    for op in ops {
-        if let OpKind::InsertNode { id, node_type, name, .. } = &op.kind
-            && !deleted.contains(id)
-        {
-            nodes.insert(*id, (op, node_type, name));
-        }
-    }
+    ops.iter()
+        .filter_map(|op| match &op.kind {
+            OpKind::InsertNode { id, node_type, name, .. } if !deleted.contains(id) => {
+                Some((*id, (op, node_type, name)))
+            }
+            _ => None,
+        })
+        .collect()
+}
 
-    let mut edges: BTreeSet<EdgeKey> = BTreeSet::new();
-    for op in ops {
-        if let OpKind::InsertEdge { key, .. } = &op.kind {
-            let removed = ops.iter().any(|later| {
-                matches!(&later.kind, OpKind::DeleteEdge { key: k } if k == key) && later.past.contains(&op.id)
-            });
-            if !removed && nodes.contains_key(&key.from) && nodes.contains_key(&key.to) {
-                edges.insert(key.clone());
-            }
-        }
-    }
+/// The edges the docs make visible: some insert of it that no delete of it had applied (add wins), between two
+/// visible nodes.
+fn visible_edges(ops: &[OpRecord], nodes: &BTreeMap<NodeId, Inserted<'_>>) -> BTreeSet<EdgeKey> {
+    let deletes_applying = |insert: &OpRecord, key: &EdgeKey| {
+        ops.iter().any(|later| {
+            matches!(&later.kind, OpKind::DeleteEdge { key: k } if k == key) && later.past.contains(&insert.id)
+        })
+    };
+    ops.iter()
+        .filter_map(|op| match &op.kind {
+            OpKind::InsertEdge { key, .. } if !deletes_applying(op, key) => Some(key),
+            _ => None,
+        })
+        .filter(|key| nodes.contains_key(&key.from) && nodes.contains_key(&key.to))
+        .cloned()
+        .collect()
+}
 
-    let mut writes: Vec<Write<'_>> = Vec::new();
-    for op in ops {
-        match &op.kind {
-            OpKind::InsertNode { id, attrs, .. } => {
-                writes.extend(attrs.iter().map(|(name, value)| Write {
-                    op,
-                    element: Element::Node(*id),
-                    name: name.clone(),
-                    value: value.clone(),
-                }));
-            }
-            OpKind::InsertEdge { key, attrs } => {
-                writes.extend(attrs.iter().map(|(name, value)| Write {
-                    op,
-                    element: Element::Edge(key.clone()),
-                    name: name.clone(),
-                    value: value.clone(),
-                }));
-            }
-            OpKind::SetAttr { element, name, value } => {
-                writes.push(Write { op, element: element.clone(), name: name.clone(), value: value.clone() })
-            }
-            _ => {}
-        }
-    }
-    let mut live: BTreeMap<(Element, Name), Vec<&Write<'_>>> = BTreeMap::new();
-    for write in &writes {
-        let ended = ops.iter().any(|later| later.past.contains(&write.op.id) && supersedes(&later.kind, write));
-        if !ended {
-            live.entry((write.element.clone(), write.name.clone())).or_default().push(write);
-        }
-    }
-    let attrs_of = |element: &Element| -> BTreeMap<Name, VisibleAttr> {
-        live.range((element.clone(), Name::new(""))..)
-            .take_while(|((e, _), _)| e == element)
-            .map(|((_, name), writes)| {
-                let mut concurrent: Vec<(Stamp, ReplicaId, Value)> =
-                    writes.iter().map(|w| (w.op.stamp, w.op.replica, w.value.clone())).collect();
-                concurrent.sort_by_key(|(stamp, replica, _)| (*stamp, *replica));
-                let value = concurrent.last().expect("a live register has a write").2.clone();
-                (name.clone(), VisibleAttr { value, concurrent })
-            })
+/// Every attribute write: the initial attributes of inserts and the writes.
+fn writes(ops: &[OpRecord]) -> Vec<Write<'_>> {
+    let initial = |op, element: Element, attrs: &[(Name, Value)]| -> Vec<Write<'_>> {
+        attrs
+            .iter()
+            .map(|(name, value)| Write { op, element: element.clone(), name: name.clone(), value: value.clone() })
             .collect()
     };
+    ops.iter()
+        .flat_map(|op| match &op.kind {
+            OpKind::InsertNode { id, attrs, .. } => initial(op, Element::Node(*id), attrs),
+            OpKind::InsertEdge { key, attrs } => initial(op, Element::Edge(key.clone()), attrs),
+            OpKind::SetAttr { element, name, value } => {
+                vec![Write { op, element: element.clone(), name: name.clone(), value: value.clone() }]
+            }
+            _ => Vec::new(),
+        })
+        .collect()
+}
 
-    let mut holders: BTreeMap<&Name, (Stamp, NodeId)> = BTreeMap::new();
-    for (id, (op, _, name)) in &nodes {
-        let candidate = (op.stamp, *id);
-        holders.entry(name).and_modify(|held| *held = (*held).min(candidate)).or_insert(candidate);
+/// The register of one attribute as the docs describe it: the values kept (writes that no later write, removal,
+/// edge delete or re-insert had applied), and the winner: the causally latest of them, or, among several concurrent
+/// ones, the highest (stamp, replica id, counter).
+/// `None` only for operations whose pasts form a cycle (a recorded history that no run can produce).
+fn register(order: &CausalOrder<'_>, kept: &[&Write<'_>]) -> Option<VisibleAttr> {
+    let latest = kept.iter().filter(|w| !kept.iter().any(|other| order.sees(other.op.id, w.op.id)));
+    let winner = latest.max_by_key(|w| w.rank())?;
+    let mut concurrent: Vec<(Stamp, ReplicaId, Value)> =
+        kept.iter().map(|w| (w.op.stamp, w.op.replica, w.value.clone())).collect();
+    concurrent.sort_by_key(|(stamp, replica, _)| (*stamp, *replica));
+    Some(VisibleAttr { value: winner.value.clone(), concurrent })
+}
+
+/// The shown name of each visible node: among visible nodes inserted with one name, the first insert in causal order
+/// keeps it, or, among several concurrent first inserts, the lowest (insert stamp, id); the others show `name#id`.
+fn shown_names(order: &CausalOrder<'_>, nodes: &BTreeMap<NodeId, Inserted<'_>>) -> BTreeMap<NodeId, String> {
+    let mut by_name: BTreeMap<&Name, Vec<(NodeId, &OpRecord)>> = BTreeMap::new();
+    for (id, (op, _, name)) in nodes {
+        by_name.entry(name).or_default().push((*id, op));
     }
+    let mut shown = BTreeMap::new();
+    for (name, inserts) in by_name {
+        let first = inserts.iter().filter(|(_, op)| !inserts.iter().any(|(_, other)| order.sees(op.id, other.id)));
+        let holder = first.min_by_key(|(id, op)| (op.stamp, *id)).map(|(id, _)| *id);
+        for (id, _) in &inserts {
+            shown.insert(*id, if Some(*id) == holder { name.to_string() } else { format!("{name}#{id}") });
+        }
+    }
+    shown
+}
+
+/// The visible graph the specification requires after all of `ops` have been applied.
+pub fn visible_graph(ops: &[OpRecord]) -> VisibleGraph {
+    let order = CausalOrder::new(ops);
+    let nodes = visible_nodes(ops);
+    let edges = visible_edges(ops, &nodes);
+    let all_writes = writes(ops);
+    let mut kept: BTreeMap<(Element, Name), Vec<&Write<'_>>> = BTreeMap::new();
+    for write in all_writes.iter().filter(|w| !ops.iter().any(|later| supersedes(later, w))) {
+        kept.entry((write.element.clone(), write.name.clone())).or_default().push(write);
+    }
+    let attrs_of = |element: &Element| -> BTreeMap<Name, VisibleAttr> {
+        kept.range((element.clone(), Name::new(""))..)
+            .take_while(|((e, _), _)| e == element)
+            .filter_map(|((_, name), writes)| Some((name.clone(), register(&order, writes)?)))
+            .collect()
+    };
+    let mut names = shown_names(&order, &nodes);
+    let node = |(id, (_, node_type, _)): (&NodeId, &Inserted<'_>)| {
+        let name = names.remove(id).unwrap_or_default();
+        (*id, VisibleNode { node_type: (*node_type).clone(), name, attrs: attrs_of(&Element::Node(*id)) })
+    };
     VisibleGraph {
-        nodes: nodes
-            .iter()
-            .map(|(id, (_, node_type, name))| {
-                let shown = if holders[name].1 == *id { name.to_string() } else { format!("{name}#{id}") };
-                let node =
-                    VisibleNode { node_type: (*node_type).clone(), name: shown, attrs: attrs_of(&Element::Node(*id)) };
-                (*id, node)
-            })
-            .collect(),
+        nodes: nodes.iter().map(node).collect(),
         edges: edges.iter().map(|key| (key.clone(), attrs_of(&Element::Edge(key.clone())))).collect(),
     }
 }
@@ -314,4 +361,92 @@ pub fn conflict(a: &OpKind, b: &OpKind) -> bool {
     };
     let shared = node_of(a).iter().any(|id| node_of(b).contains(id));
     same_attr || same_name || (shared && (destructive(a) || destructive(b)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dsr::Dot;
+
+    /// An operation of replica `replica`, counter `counter`, at `stamp`, having applied `past`.
+    fn op(replica: u32, counter: u64, stamp: u64, past: &[&OpRecord], kind: OpKind) -> OpRecord {
+        let id = Dot::new(ReplicaId(replica), counter);
+        let past = past.iter().map(|p| p.id).collect();
+        OpRecord { id, replica: ReplicaId(replica), stamp: Stamp(stamp), past, kind }
+    }
+
+    fn insert(id: u64, name: &str) -> OpKind {
+        OpKind::InsertNode { id: NodeId(id), node_type: Name::new("object"), name: Name::new(name), attrs: Vec::new() }
+    }
+
+    fn set_level(id: u64, level: i32) -> OpKind {
+        OpKind::SetAttr { element: Element::Node(NodeId(id)), name: Name::new("level"), value: Value::I32(level) }
+    }
+
+    fn level(graph: &VisibleGraph, id: u64) -> (Value, usize) {
+        let attr = &graph.nodes[&NodeId(id)].attrs[&Name::new("level")];
+        (attr.value.clone(), attr.concurrent.len())
+    }
+
+    #[test]
+    fn a_write_known_only_through_a_third_replica_stays_listed_but_the_causally_latest_wins() {
+        let x = op(9, 1, 1, &[], insert(1, "x"));
+        let a = op(1, 1, 2, &[&x], set_level(1, 1));
+        let b = op(2, 1, 3, &[&x, &a], insert(2, "y"));
+        let c = op(3, 1, 4, &[&x, &b], set_level(1, 3));
+        assert_eq!(level(&visible_graph(&[x, a, b, c]), 1), (Value::I32(3), 2));
+    }
+
+    #[test]
+    fn a_write_its_overwriter_had_applied_is_gone() {
+        let x = op(9, 1, 1, &[], insert(1, "x"));
+        let a = op(1, 1, 2, &[&x], set_level(1, 1));
+        let c = op(3, 1, 4, &[&x, &a], set_level(1, 3));
+        assert_eq!(level(&visible_graph(&[x, a, c]), 1), (Value::I32(3), 1));
+    }
+
+    #[test]
+    fn concurrent_writes_fall_back_to_the_highest_stamp_then_replica() {
+        let x = op(9, 1, 1, &[], insert(1, "x"));
+        let a = op(1, 1, 5, &[&x], set_level(1, 1));
+        let b = op(2, 1, 5, &[&x], set_level(1, 2));
+        assert_eq!(level(&visible_graph(&[x.clone(), a, b]), 1), (Value::I32(2), 2));
+        let a = op(1, 1, 6, &[&x], set_level(1, 1));
+        let b = op(2, 1, 5, &[&x], set_level(1, 2));
+        assert_eq!(level(&visible_graph(&[x, a, b]), 1), (Value::I32(1), 2));
+    }
+
+    #[test]
+    fn the_winner_follows_causality_even_where_stamps_do_not() {
+        // A history no correct replica produces (the later write stamped lower): the specification still shows the
+        // causally latest write, where "highest stamp" would show the overwritten one beside it.
+        let x = op(9, 1, 1, &[], insert(1, "x"));
+        let a = op(1, 1, 9, &[&x], set_level(1, 1));
+        let via = op(3, 1, 2, &[&a], insert(5, "z"));
+        let b = op(2, 1, 3, &[&x, &via], set_level(1, 2));
+        assert_eq!(level(&visible_graph(&[x, a, via, b]), 1), (Value::I32(2), 2));
+    }
+
+    #[test]
+    fn the_causally_first_insert_keeps_a_shared_name_and_concurrent_ones_the_lowest_stamp_and_id() {
+        let first = op(1, 1, 2, &[], insert(10, "n"));
+        let relay = op(2, 1, 3, &[&first], insert(20, "m"));
+        let later = op(3, 1, 4, &[&relay], insert(30, "n"));
+        let graph = visible_graph(&[first.clone(), relay, later]);
+        assert_eq!(graph.nodes[&NodeId(10)].name, "n");
+        assert_eq!(graph.nodes[&NodeId(30)].name, "n#30");
+        let concurrent = op(3, 1, 2, &[], insert(5, "n"));
+        let graph = visible_graph(&[first, concurrent]);
+        assert_eq!((graph.nodes[&NodeId(5)].name.as_str(), graph.nodes[&NodeId(10)].name.as_str()), ("n", "n#10"));
+    }
+
+    #[test]
+    fn pasts_that_form_a_cycle_give_a_graph_without_panicking() {
+        let x = op(9, 1, 1, &[], insert(1, "x"));
+        let mut a = op(1, 1, 2, &[&x], set_level(1, 1));
+        let b = op(2, 1, 3, &[&x, &a], set_level(1, 2));
+        a.past.insert(b.id);
+        let graph = visible_graph(&[x, a, b]);
+        assert!(graph.nodes.contains_key(&NodeId(1)));
+    }
 }

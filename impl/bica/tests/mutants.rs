@@ -92,3 +92,16 @@ fn removed_stepped_once_more_mutant_steps_a_removed_component() {
     assert_eq!(runs_after_removal(None), 0);
     assert_eq!(runs_after_removal(Some(SchedulerMutant::RemovedSteppedOnceMore)), 1);
 }
+
+fn finish_with_nothing_running(mutant: Option<SchedulerMutant>) -> bool {
+    let mut core = SchedulerCore::new(SchedulerConfig { mutant, ..SchedulerConfig::default() });
+    let id = core.register(10 * MS).unwrap();
+    core.activate(id, 0).unwrap();
+    core.finish_step(id, 0).is_ok()
+}
+
+#[test]
+fn finish_unmatched_mutant_accepts_finishing_a_step_that_is_not_running() {
+    assert!(!finish_with_nothing_running(None));
+    assert!(finish_with_nothing_running(Some(SchedulerMutant::FinishUnmatched)));
+}

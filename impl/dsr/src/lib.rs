@@ -57,8 +57,10 @@
 //! gives it exactly the attributes given (leftover attribute values it had seen are removed).
 //!
 //! **Attributes.** Each (element, attribute) is a multi-value register: a write supersedes the values its replica
-//! has seen; concurrent writes are all kept. Reads return one deterministic winner, the value with the highest
-//! (stamp, replica id, counter); [`NodeRef::concurrent`] exposes the others. Removing an attribute removes the
+//! has seen; concurrent writes are all kept. Reads return one deterministic winner: the causally latest of the kept
+//! values (the one no other kept value's write happened after), or among several concurrent ones the highest
+//! (stamp, replica id, counter), which, since stamps follow causality, is the kept value with the highest (stamp,
+//! replica id, counter); [`NodeRef::concurrent`] exposes the others. Removing an attribute removes the
 //! values seen; a concurrent write survives. Writing to an invisible element is refused locally; remote writes to an
 //! element not yet visible are kept and show once it is. "Seen" means applied by that replica: deltas are not
 //! delivered causally, so a write that a replica only knows of through a third replica's unrelated operation is not
@@ -70,8 +72,10 @@
 //! therefore has a higher stamp, so the winner is never a value the writer had overwritten.
 //!
 //! **Names.** Node names are unique among visible nodes. A local insert with a name already visible is refused.
-//! Two agents that concurrently insert different nodes with the same name both succeed; every replica then shows
-//! the node with the lowest (insert stamp, id) under the plain name and the other as `name#id`. Node names may not
+//! Two agents that concurrently insert different nodes with the same name both succeed; among visible nodes sharing a
+//! name, every replica then shows the causally first insert (or among concurrent ones the lowest (insert stamp,
+//! id); since stamps follow causality, the lowest (insert stamp, id) of all) under the plain name and the others as
+//! `name#id`. Node names may not
 //! contain `#`. If the holder is deleted, the other takes the plain name back. A node whose shown name changes
 //! either way is reported by a [`Change::NodeRenamed`] event (found by the model).
 //!

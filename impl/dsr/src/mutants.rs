@@ -47,11 +47,17 @@ pub enum DsrMutant {
     StampTiesPhysicalClock,
     /// Joining a snapshot does not move the clock past the snapshot's stamps.
     SnapshotJoinKeepsClock,
+    /// A register's winner is the value with the lowest (stamp, replica id, counter), not the highest: the same on
+    /// every replica, so only the specification tells it from the right rule.
+    WinnerLowestRank,
+    /// Among visible nodes sharing a name, the latest insert (highest stamp, then id) keeps the plain name: the same
+    /// on every replica, so only the specification tells it from the right rule.
+    NameHeldByLatest,
 }
 
 impl DsrMutant {
     /// Every mutant.
-    pub const ALL: [DsrMutant; 16] = [
+    pub const ALL: [DsrMutant; 18] = [
         DsrMutant::JoinNotIdempotent,
         DsrMutant::RemoveLosesContext,
         DsrMutant::TieBreakByArrival,
@@ -68,6 +74,8 @@ impl DsrMutant {
         DsrMutant::IncidentEdgeEventsMissing,
         DsrMutant::StampTiesPhysicalClock,
         DsrMutant::SnapshotJoinKeepsClock,
+        DsrMutant::WinnerLowestRank,
+        DsrMutant::NameHeldByLatest,
     ];
 }
 

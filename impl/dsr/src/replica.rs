@@ -1206,10 +1206,17 @@ impl Replica {
         Some(NodeRef { replica: self, id, entry, core })
     }
 
+    /// Which of the visible nodes sharing a name, indexed by (insert stamp, id), holds it: the lowest (a planted
+    /// mutant may change the rule).
+    fn name_holder(&self, holders: &BTreeSet<(Stamp, NodeId)>) -> Option<NodeId> {
+        let holder = if self.plant.is(DsrMutant::NameHeldByLatest) { holders.last() } else { holders.first() };
+        holder.map(|(_, id)| *id)
+    }
+
     /// The visible node shown under `name` (see the crate docs for renamed nodes, `name#id`).
     pub fn node_by_name(&self, name: &str) -> Option<NodeRef<'_>> {
         if let Some(holders) = self.names.get(name) {
-            return holders.first().and_then(|(_, id)| self.node(*id));
+            return self.name_holder(holders).and_then(|id| self.node(id));
         }
         let (base, id) = name.rsplit_once('#')?;
         let node = self.node(NodeId(id.parse().ok()?))?;
@@ -1556,7 +1563,7 @@ impl<'a> NodeRef<'a> {
     /// Whether the node is shown under its plain inserted name (not `name#id`).
     pub fn holds_name(&self) -> bool {
         let holders = self.replica.names.get(&self.core.value.name);
-        holders.and_then(|holders| holders.first()).is_some_and(|(_, id)| *id == self.id)
+        holders.and_then(|holders| self.replica.name_holder(holders)) == Some(self.id)
     }
 
     /// The name as inserted.

@@ -76,6 +76,9 @@ impl<T: Clone> Register<T> {
         if plant.is(DsrMutant::TieBreakByArrival) {
             return self.values.last();
         }
+        if plant.is(DsrMutant::WinnerLowestRank) {
+            return self.values.iter().min_by_key(|entry| entry.rank());
+        }
         self.winner()
     }
 

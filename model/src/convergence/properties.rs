@@ -30,6 +30,9 @@ pub const SPEC_EVERY: &str =
     "every state: a replica that applied a causally closed set of operations shows their specification";
 /// A late joiner installing a snapshot equals its source.
 pub const LATE_JOIN: &str = "every state: a fresh replica installing a replica's snapshot equals it";
+/// Kinematics agree.
+pub const KINEMATICS: &str = "every state: replicas that applied the same operations compute the same transforms, \
+                              and an RT edge's transform is its shown translation and rotation";
 /// Change events are complete.
 pub const EVENTS: &str = "every step: the change events turn the previous visible graph into the new one";
 /// Convergence at quiescence.
@@ -40,6 +43,8 @@ pub const SPEC: &str = "quiescent, budget spent: every replica applied every ope
 pub const CONFLICTS: &str = "concurrent conflicting operations happen";
 /// Anti-entropy falls back to a snapshot (with announces).
 pub const SNAPSHOT: &str = "an announce is answered with a snapshot (when announces are allowed)";
+/// An RT edge is moved after its insert (the kinematics property is not only about inserts).
+pub const RT_MOVED: &str = "an RT edge's translation is written after its insert (with 3 operations or more)";
 /// The quiescent end is reached (the quiescent properties are not vacuous).
 pub const END: &str = "a quiescent state with the budget spent is reached";
 
@@ -99,6 +104,19 @@ impl Setup {
         Setup { config, seed, cache: Arc::new(OracleCache::default()) }
     }
 
+    /// A fresh replica with the planted mutant, if any: the oracle's replicas run the same code as the model's, so
+    /// a deterministic bug is the specification's to find, and the fresh join checks only order independence.
+    fn fresh_replica(&self, id: ReplicaId) -> Replica {
+        let replica = Replica::new(id);
+        #[cfg(feature = "mutants")]
+        let replica = {
+            let mut replica = replica;
+            replica.plant_mutant(self.config.planted);
+            replica
+        };
+        replica
+    }
+
     /// The oracle for the operations `seen` (their deltas found among the issued ones).
     fn oracle(&self, state: &State, seen: &BTreeSet<OpId>) -> Arc<Oracle> {
         let issued: Vec<&Issued> = state
@@ -122,7 +140,7 @@ impl Setup {
 
     fn compute_oracle(&self, issued: &[&Issued]) -> Oracle {
         let join = |order: &mut dyn Iterator<Item = &&Issued>| -> Result<Replica, String> {
-            let mut fresh = Replica::new(ReplicaId(999));
+            let mut fresh = self.fresh_replica(ReplicaId(999));
             fresh.apply(&self.seed.snapshot).expect("the seed graph applies");
             for issued in order {
                 let delta = Delta::decode(&issued.bytes).map_err(|e| format!("{}: {e}", issued.record))?;
@@ -309,11 +327,7 @@ pub(super) fn late_join_problem(setup: &Setup, replica: &Replica, graph: &Visibl
         Ok(snapshot) => snapshot,
         Err(error) => return Some(format!("the snapshot does not decode: {error}")),
     };
-    let mut joiner = Replica::new(ReplicaId(998));
-    #[cfg(feature = "mutants")]
-    joiner.plant_mutant(setup.config.planted);
-    #[cfg(not(feature = "mutants"))]
-    let _ = setup;
+    let mut joiner = setup.fresh_replica(ReplicaId(998));
     if let Err(error) = joiner.apply(&snapshot) {
         return Some(format!("the snapshot is refused: {error}"));
     }
@@ -342,6 +356,65 @@ pub(super) fn quiescent_replicas_match_spec(model: &ConvergenceModel, state: &St
     settled.iter().all(|r| r.visible_graph() == expected && ops.iter().all(|op| r.applied().contains(op.id)))
 }
 
+/// A point (mm) the kinematics properties map between frames (off every axis, so no rotation leaves it fixed).
+const PROBE_MM: [f64; 3] = [1.0, 2.0, 3.0];
+
+/// A point in a child's frame mapped into its parent's, from the documented convention alone (the `dsr::kinematics`
+/// module docs): `p' = t + Rx(a) · Ry(b) · Rz(c) · p`, in mm and rad; no `dsr::kinematics` code involved.
+fn child_to_parent(translation: [f64; 3], [a, b, c]: [f64; 3], point: [f64; 3]) -> [f64; 3] {
+    let rotate = |axis: usize, angle: f64, p: [f64; 3]| {
+        let (sin, cos) = angle.sin_cos();
+        let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut out = p;
+        out[i] = cos * p[i] - sin * p[j];
+        out[j] = sin * p[i] + cos * p[j];
+        out
+    };
+    let rotated = rotate(0, a, rotate(1, b, rotate(2, c, point)));
+    [rotated[0] + translation[0], rotated[1] + translation[1], rotated[2] + translation[2]]
+}
+
+/// Every visible node's frame mapped into every other's by the replica's kinematics ([`Replica::transform_point`]),
+/// errors as text.
+fn transforms(replica: &Replica, graph: &VisibleGraph) -> Vec<Result<[f64; 3], String>> {
+    let nodes: Vec<NodeId> = graph.nodes.keys().copied().collect();
+    nodes
+        .iter()
+        .flat_map(|&from| nodes.iter().map(move |&to| (from, to)))
+        .map(|(from, to)| replica.transform_point(from, to, PROBE_MM).map_err(|e| e.to_string()))
+        .collect()
+}
+
+/// Whether every visible RT edge's child maps into its parent's frame by the edge's shown (winning) translation and
+/// rotation.
+fn rt_edges_match_shown_poses(replica: &Replica, graph: &VisibleGraph) -> bool {
+    let vector = |attrs: &BTreeMap<dsr::Name, dsr::VisibleAttr>, name: &str| match attrs.get(name).map(|a| &a.value) {
+        Some(dsr::Value::VecF32(v)) if v.len() == 3 => Some([f64::from(v[0]), f64::from(v[1]), f64::from(v[2])]),
+        _ => None,
+    };
+    graph.edges.iter().filter(|(key, _)| key.edge_type.as_str() == "RT").all(|(key, attrs)| {
+        let translation = vector(attrs, dsr::attrs::RT_TRANSLATION.name());
+        let rotation = vector(attrs, dsr::attrs::RT_ROTATION_EULER_XYZ.name());
+        let (Some(translation), Some(rotation)) = (translation, rotation) else { return false };
+        let expected = child_to_parent(translation, rotation, PROBE_MM);
+        replica
+            .transform_point(key.to, key.from, PROBE_MM)
+            .is_ok_and(|p| p.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-6))
+    })
+}
+
+pub(super) fn kinematics_agree(_: &ConvergenceModel, state: &State) -> bool {
+    let replicas = &state.actor_states;
+    let each = replicas.iter().all(|s| rt_edges_match_shown_poses(&s.replica, &s.graph.0));
+    each && (0..replicas.len()).all(|a| {
+        (a + 1..replicas.len()).all(|b| {
+            replicas[a].seen != replicas[b].seen
+                || transforms(&replicas[a].replica, &replicas[a].graph.0)
+                    == transforms(&replicas[b].replica, &replicas[b].graph.0)
+        })
+    })
+}
+
 pub(super) fn conflicts_happen(model: &ConvergenceModel, state: &State) -> bool {
     let ops = all_ops(&model.inner.cfg, state);
     let order = spec::CausalOrder::new(&ops);
@@ -349,6 +422,14 @@ pub(super) fn conflicts_happen(model: &ConvergenceModel, state: &State) -> bool 
         ops[i + 1..]
             .iter()
             .any(|b| a.replica != b.replica && order.concurrent(a.id, b.id) && spec::conflict(&a.kind, &b.kind))
+    })
+}
+
+pub(super) fn rt_moved(model: &ConvergenceModel, state: &State) -> bool {
+    // A move needs three operations: the node, the RT edge to it, the move.
+    model.setup().config.ops < 3
+        || state.actor_states.iter().flat_map(|s| &s.issued).any(|op| {
+        matches!(&op.record.kind, OpKind::SetAttr { name, .. } if name.as_str() == dsr::attrs::RT_TRANSLATION.name())
     })
 }
 
