@@ -131,7 +131,8 @@ impl AttrMap {
 
     /// Stores a copy of `attribute` under `name`, narrowed to the name's type (pydsr's `__setitem__`).
     fn store(&mut self, py: Python<'_>, name: String, attribute: &Attribute) -> PyResult<()> {
-        let value = values::fit_to_name(&name, &attribute.value).ok_or_else(|| {
+        let held = self.entries.get(&name).map(|held| held.borrow(py).value.value_type());
+        let value = values::fit_to_name(&name, &attribute.value, held).ok_or_else(|| {
             PyTypeError::new_err(format!(
                 "Invalid type for attribute [{name}]. Selected type is: {}",
                 values::type_name(attribute.value.value_type())

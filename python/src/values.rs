@@ -168,9 +168,11 @@ fn known_type(name: &str, value_type: ValueType) -> ValueType {
 }
 
 /// `value` made fit for attribute `name` by the narrowing conversions pydsr's attribute map does (see the module
-/// docs); `None` when the name has another type that `value` cannot take.
-pub fn fit_to_name(name: &str, value: &Value) -> Option<Value> {
-    let wanted = known_type(name, value.value_type());
+/// docs): to the type the element already holds under that name (`held`: a graph's file may store a name with
+/// another type than the built-in one, and the graph accepts that type), else to the name's known type; `None` when
+/// `value` cannot take it.
+pub fn fit_to_name(name: &str, value: &Value, held: Option<ValueType>) -> Option<Value> {
+    let wanted = held.unwrap_or_else(|| known_type(name, value.value_type()));
     convert(value, wanted)
 }
 
