@@ -188,9 +188,13 @@ fn edge_key(replica: &Replica, from: &NodeRefArg, to: &NodeRefArg, edge_type: &s
 
 /// `DSRGraph(root, name, id, dsr_input_file="", all_same_host=True)`: a DSR_d agent of this process, joined to
 /// the agents of its DDS domain and topic prefix, or started from the JSON file when none answers.
-#[pyclass(module = "cortex_dsr", name = "DSRGraph", weakref)]
+///
+/// Frozen (no `&mut self` method): a signal callback may be inside a method of the graph on the dispatcher thread,
+/// with the GIL released, while the script's thread calls `close`; an exclusive borrow would then fail ("Already
+/// borrowed"). The agent sits behind a mutex instead, taken only to clone or take the `Arc`.
+#[pyclass(module = "cortex_dsr", name = "DSRGraph", weakref, frozen)]
 pub struct DsrGraph {
-    agent: Option<Arc<GraphAgent>>,
+    agent: std::sync::Mutex<Option<Arc<GraphAgent>>>,
     /// The signal callbacks and their dispatcher.
     pub hub: Arc<SignalHub>,
     agent_name: String,
@@ -237,8 +241,14 @@ fn start_agent(id: u32, seed: Option<&Path>, rtps: RtpsConfig, join_wait: Durati
 
 impl DsrGraph {
     /// The agent (an error after `close`).
-    pub fn agent(&self) -> PyResult<&Arc<GraphAgent>> {
-        self.agent.as_ref().ok_or_else(|| PyRuntimeError::new_err("the DSRGraph was closed"))
+    pub fn agent(&self) -> PyResult<Arc<GraphAgent>> {
+        let agent = self.agent.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        agent.ok_or_else(|| PyRuntimeError::new_err("the DSRGraph was closed"))
+    }
+
+    /// Takes the agent out (closing); `None` if already closed.
+    fn take_agent(&self) -> Option<Arc<GraphAgent>> {
+        self.agent.lock().unwrap_or_else(|p| p.into_inner()).take()
     }
 
     /// Runs `f` on the replica with the GIL released.
@@ -339,7 +349,7 @@ impl DsrGraph {
 impl Drop for DsrGraph {
     fn drop(&mut self) {
         self.hub.stop();
-        if let Some(agent) = self.agent.take() {
+        if let Some(agent) = self.take_agent() {
             // The agent's threads never need the GIL; let other Python threads run while they stop.
             Python::attach(|py| py.detach(move || agent.shutdown()));
         }
@@ -389,7 +399,11 @@ impl DsrGraph {
         for (is_node, name) in types {
             crate::objects::learn_type(is_node, &name);
         }
-        Ok(DsrGraph { agent: Some(agent), hub: Arc::new(SignalHub::default()), agent_name: name })
+        Ok(DsrGraph {
+            agent: std::sync::Mutex::new(Some(agent)),
+            hub: Arc::new(SignalHub::default()),
+            agent_name: name,
+        })
     }
 
     /// `get_node(id)` or `get_node(name)`: a copy of the node, or `None`.
@@ -606,10 +620,10 @@ impl DsrGraph {
 
     /// Stops the signal dispatcher and the agent and drops the callbacks (also done when the object is
     /// collected).
-    fn close(&mut self, py: Python<'_>) {
+    fn close(&self, py: Python<'_>) {
         self.hub.stop();
         self.hub.clear_callbacks();
-        if let Some(agent) = self.agent.take() {
+        if let Some(agent) = self.take_agent() {
             py.detach(move || agent.shutdown());
         }
     }
@@ -620,7 +634,7 @@ impl DsrGraph {
         self.hub.traverse(&visit)
     }
 
-    fn __clear__(&mut self) {
+    fn __clear__(&self) {
         self.hub.stop();
         self.hub.clear_callbacks();
     }
@@ -629,12 +643,12 @@ impl DsrGraph {
         slf
     }
 
-    fn __exit__(&mut self, py: Python<'_>, _a: Py<PyAny>, _b: Py<PyAny>, _c: Py<PyAny>) {
+    fn __exit__(&self, py: Python<'_>, _a: Py<PyAny>, _b: Py<PyAny>, _c: Py<PyAny>) {
         self.close(py);
     }
 }
 
 /// The agent behind a graph object, for the rt and inner APIs and the signals.
 pub fn agent_of(graph: &Bound<'_, DsrGraph>) -> PyResult<Arc<GraphAgent>> {
-    graph.borrow().agent().cloned()
+    graph.get().agent()
 }

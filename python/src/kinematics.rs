@@ -61,7 +61,7 @@ pub struct RtApi {
 
 impl RtApi {
     fn read<R: Send>(&self, py: Python<'_>, f: impl FnOnce(&Replica) -> R + Send) -> PyResult<R> {
-        self.graph.bind(py).borrow().read(py, f)
+        self.graph.bind(py).get().read(py, f)
     }
 }
 
@@ -231,7 +231,7 @@ impl InnerApi {
 
     /// The isometry from `orig`'s frame to `dest`'s, or `None` when it cannot be computed.
     fn pose(&self, py: Python<'_>, dest: String, orig: String) -> PyResult<Option<Isometry3<f64>>> {
-        self.graph.bind(py).borrow().read(py, move |r| {
+        self.graph.bind(py).get().read(py, move |r| {
             let dest = r.node_by_name(&dest)?.id();
             let orig = r.node_by_name(&orig)?.id();
             r.transform(orig, dest).ok()

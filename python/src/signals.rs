@@ -277,7 +277,7 @@ pub fn connect(graph: &Bound<'_, DsrGraph>, kind: SignalType, callback: Bound<'_
         return Err(PyTypeError::new_err("the callback must be callable"));
     }
     let agent = agent_of(graph)?;
-    let hub = Arc::clone(&graph.borrow().hub);
+    let hub = Arc::clone(&graph.get().hub);
     hub.callbacks.lock().unwrap_or_else(|p| p.into_inner()).push((kind, callback.unbind()));
     hub.start(agent)
 }
