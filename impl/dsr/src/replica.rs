@@ -732,8 +732,8 @@ impl Replica {
     /// indices, digest, applied operations and change events).
     fn install(&mut self, delta: Delta) -> Result<(), DeltaError> {
         debug_assert!(self.can_install(&delta));
-        self.check_names(&delta)?;
-        learn_names(&mut self.dictionary, &delta);
+        let new = self.new_names(&delta)?;
+        learn_names(&mut self.dictionary, new);
         let Delta { clock, ctx, applied, store, .. } = delta;
         let Store { mut tombstones, mut nodes, mut edges } = store;
         if self.plant.is(DsrMutant::InstallDropsTombstones) {
@@ -813,8 +813,8 @@ impl Replica {
     }
 
     fn apply_inner(&mut self, delta: &Delta, shared: impl FnOnce() -> Arc<Delta>) -> Result<(), DeltaError> {
-        self.check_names(delta)?;
-        learn_names(&mut self.dictionary, delta);
+        let new = self.new_names(delta)?;
+        learn_names(&mut self.dictionary, new);
         let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)));
         self.join(delta);
         for dot in delta.origin.iter().flat_map(Origin::dots) {
@@ -833,32 +833,51 @@ impl Replica {
         Ok(())
     }
 
-    /// Checks that every name of a delta can be held (see [`crate::dictionary::validate_name`]), changing nothing.
-    /// Names and types are not checked against the dictionary: the network is never refused for them (the
-    /// dictionary's module documentation says why), they are learned after the join ([`learn_names`]).
-    fn check_names(&self, delta: &Delta) -> Result<(), DeltaError> {
+    /// The names of a delta that the dictionary does not accept yet, each checked to be a name that can be held (see
+    /// [`crate::dictionary::validate_name`]); changes nothing. Names and types are not checked against the
+    /// dictionary: the network is never refused for them (the dictionary's module documentation says why); they are
+    /// learned once the delta has passed ([`learn_names`]). One dictionary lookup per value in the usual case, where
+    /// every name is known with its type.
+    fn new_names<'d>(&self, delta: &'d Delta) -> Result<NewNames<'d>, DeltaError> {
+        let dictionary = &*self.dictionary;
         let refused = |place: String| move |source| DeltaError::Dictionary { place, source };
-        let attrs = |attrs: &Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
-            for name in attrs.keys().filter(|name| self.dictionary.attr_type(name).is_none()) {
-                validate_name("attribute name", name).map_err(refused(format!("{} attribute {name:?}", owner())))?;
+        let mut new = NewNames::default();
+        let mut attrs = |attrs: &'d Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
+            for (name, register) in attrs {
+                for value_type in register.values.iter().map(|entry| entry.value.value_type()) {
+                    match dictionary.attr_type(name) {
+                        Some(declared) if declared == value_type => continue,
+                        Some(_) if dictionary.learned_types(name).contains(&value_type) => continue,
+                        Some(_) => {}
+                        None => validate_name("attribute name", name)
+                            .map_err(refused(format!("{} attribute {name:?}", owner())))?,
+                    }
+                    new.attrs.push((name, value_type));
+                }
             }
             Ok(())
         };
         for (id, node) in &delta.store.nodes {
-            for core in
-                node.core.values.iter().filter(|core| self.dictionary.known_node_type(&core.value.node_type).is_none())
-            {
-                validate_name("node type", &core.value.node_type).map_err(refused(format!("node {id}")))?;
-            }
             attrs(&node.attrs, &|| format!("node {id}"))?;
         }
         for (key, edge) in &delta.store.edges {
-            if self.dictionary.known_edge_type(&key.edge_type).is_none() {
-                validate_name("edge type", &key.edge_type).map_err(refused(format!("edge {key}")))?;
-            }
             attrs(&edge.attrs, &|| format!("edge {key}"))?;
         }
-        Ok(())
+        for (id, node) in &delta.store.nodes {
+            for node_type in node.core.values.iter().map(|core| &core.value.node_type) {
+                if dictionary.known_node_type(node_type).is_none() {
+                    validate_name("node type", node_type).map_err(refused(format!("node {id}")))?;
+                    new.node_types.push(node_type);
+                }
+            }
+        }
+        for (key, edge_type) in delta.store.edges.keys().map(|key| (key, &key.edge_type)) {
+            if dictionary.known_edge_type(edge_type).is_none() {
+                validate_name("edge type", edge_type).map_err(refused(format!("edge {key}")))?;
+                new.edge_types.push(edge_type);
+            }
+        }
+        Ok(new)
     }
 
     /// The join: the single mutation path for local and remote deltas alike.
@@ -1381,43 +1400,29 @@ fn group_sorted<K: Ord, T: Ord>(pairs: impl Iterator<Item = (K, T)>) -> BTreeMap
     groups.into_iter().map(|(key, items)| (key, items.into_iter().collect())).collect()
 }
 
-/// Registers the names of a delta that passed [`Replica::check_names`] (only needed when unknown names are allowed).
-/// Learns every name and attribute type of a delta that [`Replica::check_names`] passed (so none can fail),
-/// copying the shared dictionary only if something is new.
-fn learn_names(dictionary: &mut Arc<Dictionary>, delta: &Delta) {
-    let known = |dictionary: &Dictionary, name: &str, value_type: ValueType| {
-        dictionary.attr_type(name) == Some(value_type) || dictionary.learned_types(name).contains(&value_type)
-    };
-    let node_attrs = delta.store.nodes.values().map(|node| &node.attrs);
-    let all_attrs = node_attrs.chain(delta.store.edges.values().map(|edge| &edge.attrs));
-    let attrs: Vec<(&Name, ValueType)> = all_attrs
-        .flat_map(|attrs| attrs.iter())
-        .flat_map(|(name, register)| register.values.iter().map(move |entry| (name, entry.value.value_type())))
-        .filter(|(name, value_type)| !known(dictionary, name, *value_type))
-        .collect();
-    let node_types: Vec<&Name> = (delta.store.nodes.values())
-        .flat_map(|node| node.core.values.iter().map(|core| &core.value.node_type))
-        .filter(|name| dictionary.known_node_type(name).is_none())
-        .collect();
-    let edge_types: Vec<&Name> = delta
-        .store
-        .edges
-        .keys()
-        .map(|key| &key.edge_type)
-        .filter(|name| dictionary.known_edge_type(name).is_none())
-        .collect();
-    if attrs.is_empty() && node_types.is_empty() && edge_types.is_empty() {
+/// The names of a delta that its replica's dictionary does not accept yet ([`Replica::new_names`]).
+#[derive(Default)]
+struct NewNames<'d> {
+    attrs: Vec<(&'d Name, ValueType)>,
+    node_types: Vec<&'d Name>,
+    edge_types: Vec<&'d Name>,
+}
+
+/// Teaches the dictionary the names [`Replica::new_names`] found and checked (so none can fail), copying the shared
+/// dictionary only if there is one.
+fn learn_names(dictionary: &mut Arc<Dictionary>, new: NewNames<'_>) {
+    if new.attrs.is_empty() && new.node_types.is_empty() && new.edge_types.is_empty() {
         return;
     }
     let dictionary = Arc::make_mut(dictionary);
-    for (name, value_type) in attrs {
-        dictionary.learn_attr(name, value_type).expect("checked by check_names");
+    for (name, value_type) in new.attrs {
+        dictionary.learn_attr(name, value_type).expect("checked by new_names");
     }
-    for name in node_types {
-        dictionary.learn_node_type(name).expect("checked by check_names");
+    for name in new.node_types {
+        dictionary.learn_node_type(name).expect("checked by new_names");
     }
-    for name in edge_types {
-        dictionary.learn_edge_type(name).expect("checked by check_names");
+    for name in new.edge_types {
+        dictionary.learn_edge_type(name).expect("checked by new_names");
     }
 }
 
