@@ -301,13 +301,13 @@ impl DsrGraph {
     /// first value, as pydsr (the C++ API's run-time type check) does on a first write; a known name keeps its
     /// types (another is refused by the write). Node and edge types are not registered: an unknown one is refused,
     /// as in pydsr.
-    fn register_attr_names(replica: &mut Replica, attrs: &[(String, Value)]) -> Result<(), OpError> {
-        for (name, value) in attrs {
-            if replica.dictionary().attr_type(name).is_none() {
-                replica.dictionary_mut().learn_attr(name, value.value_type())?;
-            }
-        }
-        Ok(())
+    fn register_attr_names<S: AsRef<str>>(replica: &mut Replica, attrs: &[(S, Value)]) -> Result<(), OpError> {
+        let dictionary = replica.dictionary();
+        let unknown: Vec<(&str, dsr::ValueType)> = (attrs.iter())
+            .map(|(name, value)| (name.as_ref(), value.value_type()))
+            .filter(|(name, _)| dictionary.attr_type(name).is_none())
+            .collect();
+        Ok(replica.learn_names(unknown, [])?)
     }
 
     /// Writes `attrs` to `element` where they differ from what it holds and removes the attributes it holds that
@@ -335,8 +335,7 @@ impl DsrGraph {
             .map(|(name, value)| (name.as_str(), value.clone()))
             .collect();
         if !changed.is_empty() {
-            let new: Vec<(String, Value)> = changed.iter().map(|(n, v)| ((*n).to_owned(), v.clone())).collect();
-            Self::register_attr_names(replica, &new)?;
+            Self::register_attr_names(replica, &changed)?;
             deltas.push(replica.set_attrs(now, element.clone(), changed)?);
         }
         for (name, _) in current.iter().filter(|(k, _)| !attrs.iter().any(|(name, _)| name == k)) {

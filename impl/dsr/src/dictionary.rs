@@ -348,6 +348,11 @@ impl Dictionary {
         known == value_type || self.learned_types(name).contains(&value_type)
     }
 
+    /// Whether `name` is known and accepts values of `value_type` (nothing to learn).
+    pub fn knows_attr(&self, name: &str, value_type: ValueType) -> bool {
+        self.attr_type(name).is_some_and(|known| self.accepts(known, name, value_type))
+    }
+
     /// Learns an attribute name with a value type from the graph (a remote delta or a file): an unknown name is
     /// declared with that type, a known name of another type accepts that type from now on. Returns the shared
     /// name.

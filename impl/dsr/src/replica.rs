@@ -291,6 +291,30 @@ impl Replica {
         &self.dictionary
     }
 
+    /// Teaches the dictionary names that the graph itself defines (a file's, a log's): the attribute names with
+    /// their value types and the node types (see [`Dictionary::learn_attr`]). The shared dictionary is copied only
+    /// when something is new, so calling this before every write of a log costs lookups only.
+    ///
+    /// # Errors
+    /// [`DictionaryError::InvalidName`] for a name that cannot be held; names before it are learned.
+    pub fn learn_names<'n>(
+        &mut self,
+        attrs: impl IntoIterator<Item = (&'n str, ValueType)>,
+        node_types: impl IntoIterator<Item = &'n str>,
+    ) -> Result<(), DictionaryError> {
+        for (name, value_type) in attrs {
+            if !self.dictionary.knows_attr(name, value_type) {
+                Arc::make_mut(&mut self.dictionary).learn_attr(name, value_type)?;
+            }
+        }
+        for name in node_types {
+            if self.dictionary.known_node_type(name).is_none() {
+                Arc::make_mut(&mut self.dictionary).learn_node_type(name)?;
+            }
+        }
+        Ok(())
+    }
+
     /// The causal context: every dot this replica has seen, as added or as removed.
     pub fn context(&self) -> &CausalContext {
         &self.ctx
@@ -845,13 +869,11 @@ impl Replica {
         let mut attrs = |attrs: &'d Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
             for (name, register) in attrs {
                 for value_type in register.values.iter().map(|entry| entry.value.value_type()) {
-                    match dictionary.attr_type(name) {
-                        Some(declared) if declared == value_type => continue,
-                        Some(_) if dictionary.learned_types(name).contains(&value_type) => continue,
-                        Some(_) => {}
-                        None => validate_name("attribute name", name)
-                            .map_err(refused(format!("{} attribute {name:?}", owner())))?,
+                    if dictionary.knows_attr(name, value_type) {
+                        continue;
                     }
+                    validate_name("attribute name", name)
+                        .map_err(refused(format!("{} attribute {name:?}", owner())))?;
                     new.attrs.push((name, value_type));
                 }
             }

@@ -136,12 +136,7 @@ enum Failure {
 /// file do (`dsr::json`), so an agent whose dictionary is the built-in one (every `cortex agent`) writes them, and
 /// every replica that receives them learns them too.
 fn learn_log_names(replica: &mut Replica, values: &[(&str, Value)]) -> Result<(), DictionaryError> {
-    let dictionary = replica.dictionary_mut();
-    dictionary.learn_node_type(OPAQUE_NODE_TYPE)?;
-    for (name, value) in values {
-        dictionary.learn_attr(name, value.value_type())?;
-    }
-    Ok(())
+    replica.learn_names(values.iter().map(|(name, value)| (*name, value.value_type())), [OPAQUE_NODE_TYPE])
 }
 
 /// A topic's parsed definitions, kept with the schema they were parsed from.
