@@ -3,7 +3,7 @@
 use super::*;
 
 /// A parsed JSON value that keeps every key of an object, in order, so duplicates can be reported.
-#[derive(Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 enum Json {
     Null,
     Bool(bool),
@@ -253,23 +253,10 @@ fn round_fractions(raw: &Json) -> Option<(Json, usize, f64)> {
             let rounded: Vec<Option<(Json, f64)>> = items.iter().map(round).collect();
             let count = rounded.iter().flatten().count();
             let first = rounded.iter().flatten().next()?.1;
-            let items = rounded.into_iter().zip(items).map(|(new, old)| new.map_or_else(|| copy(old), |(new, _)| new));
+            let items = rounded.into_iter().zip(items).map(|(new, old)| new.map_or_else(|| old.clone(), |(new, _)| new));
             Some((Json::Array(items.collect()), count, first))
         }
         scalar => round(scalar).map(|(json, original)| (json, 1, original)),
-    }
-}
-
-/// A copy of a scalar JSON value (the items of a byte vector).
-fn copy(value: &Json) -> Json {
-    match value {
-        Json::Null => Json::Null,
-        Json::Bool(flag) => Json::Bool(*flag),
-        Json::Unsigned(number) => Json::Unsigned(*number),
-        Json::Negative(number) => Json::Negative(*number),
-        Json::Float(number) => Json::Float(*number),
-        Json::String(text) => Json::String(text.clone()),
-        Json::Array(_) | Json::Object(_) => Json::Null,
     }
 }
 
