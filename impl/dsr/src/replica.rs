@@ -12,12 +12,12 @@ use smallvec::SmallVec;
 
 use crate::causal::CausalContext;
 use crate::delta::{Delta, DeltaParts, Origin};
-use crate::dictionary::{AttrKey, Dictionary, MAX_NAME_LEN, validate_name};
+use crate::dictionary::{AttrKey, Dictionary, MAX_NAME_LEN};
 use crate::error::{DeltaError, DictionaryError, OpError};
 use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
 use crate::mutants::{DsrMutant, Plant};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store, drop_covered_attrs, join_attrs};
-use crate::value::{AttrType, Value, ValueType};
+use crate::value::{AttrType, Value};
 
 /// Whether `name` is acceptable as a node name: 1 to 255 bytes, no control characters, no `#`.
 pub fn valid_node_name(name: &str) -> bool {
@@ -289,30 +289,6 @@ impl Replica {
     /// The dictionary.
     pub fn dictionary(&self) -> &Dictionary {
         &self.dictionary
-    }
-
-    /// Teaches the dictionary names that the graph itself defines (a file's, a log's): the attribute names with
-    /// their value types and the node types (see [`Dictionary::learn_attr`]). The shared dictionary is copied only
-    /// when something is new, so calling this before every write of a log costs lookups only.
-    ///
-    /// # Errors
-    /// [`DictionaryError::InvalidName`] for a name that cannot be held; names before it are learned.
-    pub fn learn_names<'n>(
-        &mut self,
-        attrs: impl IntoIterator<Item = (&'n str, ValueType)>,
-        node_types: impl IntoIterator<Item = &'n str>,
-    ) -> Result<(), DictionaryError> {
-        for (name, value_type) in attrs {
-            if !self.dictionary.knows_attr(name, value_type) {
-                Arc::make_mut(&mut self.dictionary).learn_attr(name, value_type)?;
-            }
-        }
-        for name in node_types {
-            if self.dictionary.known_node_type(name).is_none() {
-                Arc::make_mut(&mut self.dictionary).learn_node_type(name)?;
-            }
-        }
-        Ok(())
     }
 
     /// The causal context: every dot this replica has seen, as added or as removed.
@@ -757,7 +733,7 @@ impl Replica {
     fn install(&mut self, delta: Delta) -> Result<(), DeltaError> {
         debug_assert!(self.can_install(&delta));
         let new = self.new_names(&delta)?;
-        learn_names(&mut self.dictionary, new);
+        names::learn_names(&mut self.dictionary, new);
         let Delta { clock, ctx, applied, store, .. } = delta;
         let Store { mut tombstones, mut nodes, mut edges } = store;
         if self.plant.is(DsrMutant::InstallDropsTombstones) {
@@ -838,7 +814,7 @@ impl Replica {
 
     fn apply_inner(&mut self, delta: &Delta, shared: impl FnOnce() -> Arc<Delta>) -> Result<(), DeltaError> {
         let new = self.new_names(delta)?;
-        learn_names(&mut self.dictionary, new);
+        names::learn_names(&mut self.dictionary, new);
         let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)));
         self.join(delta);
         for dot in delta.origin.iter().flat_map(Origin::dots) {
@@ -855,51 +831,6 @@ impl Replica {
         #[cfg(feature = "check-invariants")]
         self.check_invariants().expect("invariants after a join");
         Ok(())
-    }
-
-    /// The names of a delta that the dictionary does not accept yet, each checked to be a name that can be held (see
-    /// [`crate::dictionary::validate_name`]); changes nothing. Names and types are not checked against the
-    /// dictionary: the network is never refused for them (the dictionary's module documentation says why); they are
-    /// learned once the delta has passed ([`learn_names`]). One dictionary lookup per value in the usual case, where
-    /// every name is known with its type.
-    fn new_names<'d>(&self, delta: &'d Delta) -> Result<NewNames<'d>, DeltaError> {
-        let dictionary = &*self.dictionary;
-        let refused = |place: String| move |source| DeltaError::Dictionary { place, source };
-        let mut new = NewNames::default();
-        let mut attrs = |attrs: &'d Attrs, owner: &dyn Fn() -> String| -> Result<(), DeltaError> {
-            for (name, register) in attrs {
-                for value_type in register.values.iter().map(|entry| entry.value.value_type()) {
-                    if dictionary.knows_attr(name, value_type) {
-                        continue;
-                    }
-                    validate_name("attribute name", name)
-                        .map_err(refused(format!("{} attribute {name:?}", owner())))?;
-                    new.attrs.push((name, value_type));
-                }
-            }
-            Ok(())
-        };
-        for (id, node) in &delta.store.nodes {
-            attrs(&node.attrs, &|| format!("node {id}"))?;
-        }
-        for (key, edge) in &delta.store.edges {
-            attrs(&edge.attrs, &|| format!("edge {key}"))?;
-        }
-        for (id, node) in &delta.store.nodes {
-            for node_type in node.core.values.iter().map(|core| &core.value.node_type) {
-                if dictionary.known_node_type(node_type).is_none() {
-                    validate_name("node type", node_type).map_err(refused(format!("node {id}")))?;
-                    new.node_types.push(node_type);
-                }
-            }
-        }
-        for (key, edge_type) in delta.store.edges.keys().map(|key| (key, &key.edge_type)) {
-            if dictionary.known_edge_type(edge_type).is_none() {
-                validate_name("edge type", edge_type).map_err(refused(format!("edge {key}")))?;
-                new.edge_types.push(edge_type);
-            }
-        }
-        Ok(new)
     }
 
     /// The join: the single mutation path for local and remote deltas alike.
@@ -1422,32 +1353,6 @@ fn group_sorted<K: Ord, T: Ord>(pairs: impl Iterator<Item = (K, T)>) -> BTreeMap
     groups.into_iter().map(|(key, items)| (key, items.into_iter().collect())).collect()
 }
 
-/// The names of a delta that its replica's dictionary does not accept yet ([`Replica::new_names`]).
-#[derive(Default)]
-struct NewNames<'d> {
-    attrs: Vec<(&'d Name, ValueType)>,
-    node_types: Vec<&'d Name>,
-    edge_types: Vec<&'d Name>,
-}
-
-/// Teaches the dictionary the names [`Replica::new_names`] found and checked (so none can fail), copying the shared
-/// dictionary only if there is one.
-fn learn_names(dictionary: &mut Arc<Dictionary>, new: NewNames<'_>) {
-    if new.attrs.is_empty() && new.node_types.is_empty() && new.edge_types.is_empty() {
-        return;
-    }
-    let dictionary = Arc::make_mut(dictionary);
-    for (name, value_type) in new.attrs {
-        dictionary.learn_attr(name, value_type).expect("checked by new_names");
-    }
-    for name in new.node_types {
-        dictionary.learn_node_type(name).expect("checked by new_names");
-    }
-    for name in new.edge_types {
-        dictionary.learn_edge_type(name).expect("checked by new_names");
-    }
-}
-
 fn element_store(element: &Element, registers: Attrs) -> Store {
     let mut store = Store::default();
     match element {
@@ -1754,6 +1659,8 @@ impl<'a> Attributes<'a> {
         self.attrs.is_empty()
     }
 }
+
+mod names;
 
 #[cfg(test)]
 mod install_tests;

@@ -253,7 +253,8 @@ fn round_fractions(raw: &Json) -> Option<(Json, usize, f64)> {
             let rounded: Vec<Option<(Json, f64)>> = items.iter().map(round).collect();
             let count = rounded.iter().flatten().count();
             let first = rounded.iter().flatten().next()?.1;
-            let items = rounded.into_iter().zip(items).map(|(new, old)| new.map_or_else(|| old.clone(), |(new, _)| new));
+            let items =
+                rounded.into_iter().zip(items).map(|(new, old)| new.map_or_else(|| old.clone(), |(new, _)| new));
             Some((Json::Array(items.collect()), count, first))
         }
         scalar => round(scalar).map(|(json, original)| (json, 1, original)),

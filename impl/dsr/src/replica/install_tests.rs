@@ -290,7 +290,7 @@ fn names_of_a_snapshot_are_learned_or_refused_alike_on_both_paths() {
         assert_eq!(fast_result, general_result, "case {case}");
         assert_eq!(fast.digest(), general.digest(), "case {case}");
         match case {
-            0 => assert_eq!(fast.dictionary().learned_types("pos_x"), [ValueType::I32]),
+            0 => assert_eq!(fast.dictionary().learned_types("pos_x"), [crate::value::ValueType::I32]),
             1 => assert!(fast.dictionary().known_node_type("no_such_type").is_some()),
             _ => {
                 let error = fast_result.unwrap_err().to_string();
