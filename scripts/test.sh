@@ -24,6 +24,8 @@ fi
 # build too, asks python3 for its version), builds the module with maturin into a venv under the target directory
 # and the `cortex` binary, and runs the Python tests, including a Python agent beside `cortex agent` processes.
 bash scripts/test-python.sh
+# No import cycle between the modules of any crate (ARCHITECTURE.md, "Conventions").
+python3 scripts/module-cycles.py
 cargo test --workspace --all-targets
 # The RTPS tests once more in a fresh network namespace whose loopback is multicast-capable, where
 # `RtpsConfig::multicast` (default `Auto`) turns multicast on (two participants per transport, one datagram for all
