@@ -3,49 +3,19 @@
 //! rebuilds the participants, writers and readers when they have ended (see the parent module's documentation,
 //! "Recovery").
 
-use super::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
-/// One of the threads `rustdds` 0.15 runs per participant ("RustDDS Participant N event loop", "RustDDS discovery
-/// thread"), known by its Linux thread id and its name as `/proc` shows it (15 bytes at most). While a participant
-/// exists, both threads must run: each ends only when the participant is dropped — or, in `rustdds` 0.15, on any
-/// error of its `poll` (see the module documentation, "Recovery").
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) struct EngineThread {
-    pub(super) tid: u32,
-    pub(super) name: String,
-}
+use crossbeam_channel::{SendTimeoutError, Sender};
+use rustdds::StatusEvented;
 
-/// Prefix of the names of `rustdds`'s threads.
-const ENGINE_THREAD_PREFIX: &str = "RustDDS";
-
-/// Participants are created one at a time in this process, so that the `rustdds` threads that appear during a
-/// creation are that creation's (see [`EngineThread`]).
-pub(super) static CREATING_PARTICIPANTS: Mutex<()> = Mutex::new(());
-
-impl EngineThread {
-    /// The `rustdds` threads of this process now; empty where `/proc/self/task` cannot be read (not Linux).
-    pub(super) fn all() -> Vec<EngineThread> {
-        let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return Vec::new() };
-        tasks
-            .filter_map(|task| {
-                let task = task.ok()?;
-                let tid = task.file_name().to_str()?.parse().ok()?;
-                let name = std::fs::read_to_string(task.path().join("comm")).ok()?;
-                let name = name.trim_end_matches('\n');
-                name.starts_with(ENGINE_THREAD_PREFIX).then(|| EngineThread { tid, name: name.to_owned() })
-            })
-            .collect()
-    }
-
-    /// Whether the thread still runs: it is in `/proc/self/task` under its name (a thread id reused by another
-    /// thread has another name). An unreadable entry for any other reason than its absence counts as running.
-    pub(super) fn alive(&self) -> bool {
-        match std::fs::read_to_string(format!("/proc/self/task/{}/comm", self.tid)) {
-            Ok(name) => name.trim_end_matches('\n') == self.name,
-            Err(error) => error.kind() != std::io::ErrorKind::NotFound,
-        }
-    }
-}
+use super::Shared;
+use super::discovery::{DiscoveryState, endpoint_of};
+use super::generation::{Generation, Participants, Reading};
+use super::payload::{Payload, Writer};
+use super::settings::RtpsConfig;
+use crate::{Channel, Counters, Sample, Sink};
 
 /// How often the receiving thread checks that `rustdds`'s threads still run (a few small `/proc` reads).
 const ENGINE_CHECK_PERIOD: Duration = Duration::from_millis(500);
@@ -56,81 +26,6 @@ const ENGINE_CHECK_AFTER_EINTR: Duration = Duration::from_millis(50);
 const MIN_REBUILD_INTERVAL: Duration = Duration::from_secs(1);
 /// Longest wait before another attempt when a rebuild fails.
 const MAX_REBUILD_RETRY: Duration = Duration::from_secs(10);
-
-/// The receiving thread's view of discovery: the participant's status events, and which local writer and reader
-/// serve which channel.
-pub(super) struct DiscoveryWatch {
-    /// The status events of the transport's participants (one or two).
-    pub(super) statuses: Vec<DomainParticipantStatusListener>,
-    /// The GUID prefixes of this transport's participants: rustdds also matches a transport's writers with its own
-    /// readers (in the same participant or the other), which is no peer.
-    pub(super) own: Vec<Prefix>,
-    pub(super) endpoints: Vec<(Channel, GUID, GUID)>,
-    pub(super) state: Arc<DiscoveryState>,
-}
-
-impl DiscoveryWatch {
-    /// Records the status events waiting (a bounded number per call, so data is never starved).
-    fn drain(&self) {
-        for status in &self.statuses {
-            self.drain_one(status);
-        }
-    }
-
-    fn drain_one(&self, status: &DomainParticipantStatusListener) {
-        for _ in 0..256 {
-            let Some(event) = status.try_recv_status() else { return };
-            let now = SystemClock.now_ns();
-            let mut times = self.state.times.lock().unwrap_or_else(|p| p.into_inner());
-            match event {
-                DomainParticipantStatusEvent::ParticipantDiscovered { dpd }
-                    if !self.own.contains(&prefix_of(dpd.guid)) =>
-                {
-                    times.first_participant_ns.get_or_insert(now);
-                }
-                DomainParticipantStatusEvent::RemoteReaderMatched { local_writer, remote_reader }
-                    if !self.own.contains(&prefix_of(remote_reader)) =>
-                {
-                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, w, _)| *w == local_writer) {
-                        times.writer_matched_ns[channel.index()].get_or_insert(now);
-                        let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
-                        let known = &mut readers[channel.index()];
-                        if !known.contains(&remote_reader) && known.len() < MAX_REMEMBERED_READERS {
-                            known.push(remote_reader);
-                        }
-                        if *channel == Channel::Sync {
-                            self.state.sync_matches.fetch_add(1, Ordering::Release);
-                            self.state.announce_pending.store(true, Ordering::Release);
-                        }
-                    }
-                }
-                DomainParticipantStatusEvent::RemoteWriterMatched { local_reader, remote_writer }
-                    if !self.own.contains(&prefix_of(remote_writer)) =>
-                {
-                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, _, r)| *r == local_reader) {
-                        times.reader_matched_ns[channel.index()].get_or_insert(now);
-                        if *channel == Channel::Sync {
-                            self.state.sync_matches.fetch_add(1, Ordering::Release);
-                        }
-                    }
-                }
-                DomainParticipantStatusEvent::ReaderLost { guid, .. } => {
-                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
-                    for known in readers.iter_mut() {
-                        known.retain(|reader| *reader != guid);
-                    }
-                }
-                DomainParticipantStatusEvent::ParticipantLost { id, .. } => {
-                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
-                    for known in readers.iter_mut() {
-                        known.retain(|reader| reader.prefix != id);
-                    }
-                }
-                _ => {}
-            }
-        }
-    }
-}
 
 /// Where the receiving thread puts samples: the sink once one is set, else the bounded inbox.
 pub(super) struct Outlet {

@@ -1,0 +1,70 @@
+//! The late join: answering a joiner's graph request with a snapshot, and becoming ready from a graph answer
+//! (or alone, from the seed graph).
+
+use std::sync::Arc;
+
+use dsr::{Delta, Replica};
+use transport::Channel;
+
+use super::{AgentCore, Caches, Dest, Event, MAX_ANSWERED, Output};
+use crate::AgentId;
+use crate::envelope::Message;
+
+impl AgentCore {
+    pub(super) fn answer_graph_request(&mut self, from: AgentId, nonce: u64, now_ns: u64, out: &mut Output) {
+        let recent =
+            self.answered.get(&(from, nonce)).is_some_and(|at| now_ns.saturating_sub(*at) < self.config.answer_hold_ns);
+        if recent {
+            return;
+        }
+        let Some((snapshot, from_cache)) = self.snapshot_bytes() else { return };
+        self.answered.retain(|_, at| now_ns.saturating_sub(*at) < self.config.answer_hold_ns);
+        if self.answered.len() < MAX_ANSWERED {
+            self.answered.insert((from, nonce), now_ns);
+        }
+        out.events.push(Event::Answered { to: from, snapshot_bytes: snapshot.len(), from_cache });
+        let answer = Message::GraphAnswer { from: self.config.id, to: from, nonce, snapshot };
+        out.send(Channel::Sync, answer, Dest::Sender);
+    }
+
+    /// Creates this life's replica from a graph answer (or alone, from the seed), then applies what was buffered
+    /// while joining.
+    pub(super) fn become_ready(&mut self, now_ns: u64, snapshot: Option<Arc<Delta>>, out: &mut Output) {
+        if let Some(snapshot) = &snapshot {
+            self.note_incarnations(snapshot.context(), out);
+        }
+        let Some(incarnation) = self.incarnation() else {
+            out.events.push(Event::IncarnationsExhausted);
+            self.collision = Some(format!("no incarnation of {} is left", self.config.id));
+            return;
+        };
+        let mut replica = Replica::new(self.config.id.replica(incarnation));
+        replica.set_log_limits(self.config.log_limits);
+        replica.set_change_tracking(true);
+        let alone = snapshot.is_none();
+        let mut seed_nodes = None;
+        if let Some(snapshot) = snapshot {
+            if let Err(error) = replica.apply_shared(snapshot) {
+                out.events.push(Event::Rejected { what: "graph answer", error: error.to_string() });
+                return;
+            }
+            if self.seed.0.take().is_some() {
+                out.events.push(Event::SeedUnused);
+            }
+        } else if let Some(seed) = self.seed.0.take() {
+            match seed.import_into(&mut replica, now_ns) {
+                Ok(report) => {
+                    seed_nodes = Some(report.nodes);
+                    let warnings = report.warnings.iter().map(|w| Event::SeedWarning { warning: w.to_string() });
+                    out.events.extend(warnings);
+                }
+                Err(error) => out.events.push(Event::SeedRefused { error: error.to_string() }),
+            }
+        }
+        out.events.push(Event::Ready { replica: replica.id(), incarnation, alone, seed_nodes });
+        self.replica = Some(replica);
+        self.caches.0 = Caches::default();
+        let buffered: Vec<Arc<Delta>> = std::mem::take(&mut self.buffered).into();
+        self.apply("buffered delta", buffered, out);
+    }
+}

@@ -1,0 +1,145 @@
+//! What the core asks its runtime to do: messages to send ([`Send`], [`Dest`]), events worth telling a person
+//! ([`Event`]), the result of a call ([`Output`]) and of a local write ([`Written`], [`WriteRefusal`]).
+
+use std::sync::Arc;
+
+use bytes::Bytes;
+use dsr::{ChangeEvent, Delta, OpError, ReplicaId};
+use transport::Channel;
+
+use crate::AgentId;
+use crate::envelope::Message;
+
+/// Where a message goes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Dest {
+    /// Every agent of the graph.
+    All,
+    /// The endpoint the handled input came from, alone where the transport can address one.
+    Sender,
+}
+
+/// One message to send.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Send {
+    /// The channel.
+    pub channel: Channel,
+    /// The message.
+    pub message: Message,
+    /// Where it goes.
+    pub dest: Dest,
+}
+
+/// Something the shell should tell a person, count or act on.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// A received delta or snapshot was refused (the replica is unchanged).
+    Rejected {
+        /// What it was ("delta", "snapshot", ...).
+        what: &'static str,
+        /// Why.
+        error: String,
+    },
+    /// A graph request went out while joining.
+    GraphRequested,
+    /// This life became ready as `replica`. The shell records `incarnation` before this life's first write.
+    Ready {
+        /// This life's replica id.
+        replica: ReplicaId,
+        /// Its incarnation.
+        incarnation: u32,
+        /// Whether it started alone (no graph answer within the join wait).
+        alone: bool,
+        /// Nodes of the seed graph imported, when it started alone from one.
+        seed_nodes: Option<usize>,
+    },
+    /// The seed graph could not be imported; the life starts empty.
+    SeedRefused {
+        /// Why.
+        error: String,
+    },
+    /// The seed graph was imported with a warning (a name it taught the graph's dictionary, an attribute kept
+    /// under another type than the dictionary's, a link skipped: see `dsr::json`).
+    SeedWarning {
+        /// The warning, with its place in the file.
+        warning: String,
+    },
+    /// A running graph was joined, so the seed graph is not used.
+    SeedUnused,
+    /// A graph request was answered with a snapshot.
+    Answered {
+        /// The joiner.
+        to: AgentId,
+        /// Bytes of the snapshot.
+        snapshot_bytes: usize,
+        /// Whether the encoded snapshot came from the cache.
+        from_cache: bool,
+    },
+    /// Another life uses this agent id (or this life's replica id); local writes are refused from now on.
+    Collision {
+        /// What was seen.
+        detail: String,
+    },
+    /// A peer has joined the same operations but shows another digest (a replica bug; repaired with snapshots).
+    DigestMismatch {
+        /// The peer.
+        peer: AgentId,
+    },
+    /// A delta showed a gap in its writer's operations: a missing-request went out at once.
+    GapRequest {
+        /// The writer asked.
+        peer: AgentId,
+    },
+    /// No incarnation is left for a new life (more than 2^20 lives of this agent id).
+    IncarnationsExhausted,
+}
+
+/// What one call of the core asks its runtime to do.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Output {
+    /// Messages to send, in order.
+    pub sends: Vec<Send>,
+    /// The replica's change events, in order.
+    pub changes: Vec<ChangeEvent>,
+    /// Events.
+    pub events: Vec<Event>,
+}
+
+impl Output {
+    pub(super) fn send(&mut self, channel: Channel, message: Message, dest: Dest) {
+        self.sends.push(Send { channel, message, dest });
+    }
+}
+
+/// What a local write produced.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Written {
+    /// The writer.
+    pub from: AgentId,
+    /// The deltas of the operation, in order.
+    pub deltas: Vec<Arc<Delta>>,
+    /// The replica's change events.
+    pub changes: Vec<ChangeEvent>,
+}
+
+impl Written {
+    /// The messages that publish the deltas to every agent (encoding each).
+    pub fn sends(&self) -> Vec<Send> {
+        let encode = |delta: &Arc<Delta>| Message::Delta { from: self.from, delta: Bytes::from(delta.encode()) };
+        self.deltas
+            .iter()
+            .map(|delta| Send { channel: Channel::Updates, message: encode(delta), dest: Dest::All })
+            .collect()
+    }
+}
+
+/// Why a local write was refused.
+#[derive(Clone, Debug, PartialEq)]
+pub enum WriteRefusal {
+    /// The life has no replica yet.
+    NotJoined,
+    /// An id collision was seen; local writes are refused.
+    Collision(String),
+    /// The replica refused the operation.
+    Op(OpError),
+}

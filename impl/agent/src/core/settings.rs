@@ -1,0 +1,51 @@
+//! The protocol's settings and limits, and what a new life starts from.
+
+use crate::AgentId;
+use crate::mutants::Plant;
+use dsr::LogLimits;
+
+/// Most remembered answered requests.
+pub const MAX_ANSWERED: usize = 1024;
+/// Largest incarnation plus one (replica ids are 32 bits, 12 of them the agent id).
+pub const INCARNATION_LIMIT: u32 = 1 << 20;
+/// Without a recorded incarnation, the floor is drawn from the nonce below this.
+pub const RANDOM_FLOOR_LIMIT: u32 = 1 << 16;
+/// Above this many payload bytes of retained deltas, a missing-request is answered with a snapshot instead when the
+/// snapshot is smaller: the history keeps every overwritten camera frame, a snapshot only the current ones.
+pub const SNAPSHOT_IF_SMALLER_ABOVE_BYTES: usize = 1 << 20;
+
+/// The protocol's settings, in nanoseconds.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct ProtocolConfig {
+    /// This agent's id (below [`AgentId::LIMIT`]).
+    pub id: AgentId,
+    /// How long to wait for a graph from peers before starting alone.
+    pub join_wait_ns: u64,
+    /// How often to repeat the graph request while joining.
+    pub join_retry_ns: u64,
+    /// How often to announce the applied operations.
+    pub announce_period_ns: u64,
+    /// Announce once more this long after the last local write (0: never).
+    pub quiet_announce_ns: u64,
+    /// History kept for anti-entropy.
+    pub log_limits: LogLimits,
+    /// Deltas kept while joining.
+    pub max_buffered_deltas: usize,
+    /// Most bytes of deltas in one anti-entropy answer.
+    pub max_batch_bytes: usize,
+    /// How long a graph request stays answered: a joiner's repeat within it gets no second copy (a large answer
+    /// may still be on its way), one after it does (the answer may have been lost). A joiner whose answer was lost
+    /// is served again only after this, so its join wait must be longer than this plus a join retry.
+    pub answer_hold_ns: u64,
+    /// A planted protocol bug (always none without the `mutants` feature).
+    pub plant: Plant,
+}
+
+/// What a new life starts from.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub struct LifeSeed {
+    /// This life's random nonce: tells lives of one agent id apart in graph requests and announces.
+    pub nonce: u64,
+    /// The incarnation of this agent's previous life on this host, as the shell recorded it (`None`: no record).
+    pub recorded_incarnation: Option<u32>,
+}

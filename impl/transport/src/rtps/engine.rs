@@ -1,0 +1,47 @@
+//! `rustdds`'s own threads (an event loop and discovery per participant): finding a new participant's threads by
+//! name in `/proc/self/task`, and telling whether one has ended (see the parent module's documentation,
+//! "Recovery").
+
+use std::sync::Mutex;
+
+/// One of the threads `rustdds` 0.15 runs per participant ("RustDDS Participant N event loop", "RustDDS discovery
+/// thread"), known by its Linux thread id and its name as `/proc` shows it (15 bytes at most). While a participant
+/// exists, both threads must run: each ends only when the participant is dropped — or, in `rustdds` 0.15, on any
+/// error of its `poll` (see the module documentation, "Recovery").
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct EngineThread {
+    pub(super) tid: u32,
+    pub(super) name: String,
+}
+
+/// Prefix of the names of `rustdds`'s threads.
+const ENGINE_THREAD_PREFIX: &str = "RustDDS";
+
+/// Participants are created one at a time in this process, so that the `rustdds` threads that appear during a
+/// creation are that creation's (see [`EngineThread`]).
+pub(super) static CREATING_PARTICIPANTS: Mutex<()> = Mutex::new(());
+
+impl EngineThread {
+    /// The `rustdds` threads of this process now; empty where `/proc/self/task` cannot be read (not Linux).
+    pub(super) fn all() -> Vec<EngineThread> {
+        let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return Vec::new() };
+        tasks
+            .filter_map(|task| {
+                let task = task.ok()?;
+                let tid = task.file_name().to_str()?.parse().ok()?;
+                let name = std::fs::read_to_string(task.path().join("comm")).ok()?;
+                let name = name.trim_end_matches('\n');
+                name.starts_with(ENGINE_THREAD_PREFIX).then(|| EngineThread { tid, name: name.to_owned() })
+            })
+            .collect()
+    }
+
+    /// Whether the thread still runs: it is in `/proc/self/task` under its name (a thread id reused by another
+    /// thread has another name). An unreadable entry for any other reason than its absence counts as running.
+    pub(super) fn alive(&self) -> bool {
+        match std::fs::read_to_string(format!("/proc/self/task/{}/comm", self.tid)) {
+            Ok(name) => name.trim_end_matches('\n') == self.name,
+            Err(error) => error.kind() != std::io::ErrorKind::NotFound,
+        }
+    }
+}

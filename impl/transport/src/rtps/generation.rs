@@ -1,0 +1,193 @@
+//! One generation of DDS entities: the participants, and every topic, writer and reader in them, as the transport
+//! creates them at start and the receiving thread creates them again at every rebuild (see the parent module's
+//! documentation, "Recovery").
+
+use std::sync::Arc;
+
+use rustdds::policy::Reliability;
+use rustdds::{DomainParticipant, DomainParticipantBuilder, QosPolicies, RTPSEntity, Topic, TopicKind};
+
+use super::discovery::{DiscoveryState, DiscoveryWatch, Prefix, endpoint_of, prefix_of};
+use super::engine::{CREATING_PARTICIPANTS, EngineThread};
+use super::payload::{OctetsAdapter, Payload, Reader, Writer};
+use super::settings::{RtpsConfig, best_effort_max_bytes, qos, qos_with, routable_ipv4_addresses};
+use crate::{Channel, EndpointId, TransportError};
+
+/// The participants of one generation of DDS entities.
+pub(super) struct Participants {
+    pub(super) _publishing: DomainParticipant,
+    /// The readers' own participant (see [`RtpsTransport::new`]); `None` only when neither
+    /// `separate_reader_participant` nor multicast asks for it.
+    pub(super) _subscribing: Option<DomainParticipant>,
+}
+
+/// A full set of DDS entities, as [`Generation::build`] makes them: at start, and at every rebuild.
+/// Fields drop in order: the writers and readers before the participants.
+pub(super) struct Generation {
+    pub(super) writers: Vec<Writer>,
+    pub(super) best_effort: Option<Writer>,
+    pub(super) reading: Reading,
+    pub(super) local: EndpointId,
+    pub(super) reading_prefix: Prefix,
+    pub(super) participants: Participants,
+}
+
+/// What the receiving thread owns of a generation.
+pub(super) struct Reading {
+    pub(super) readers: Vec<(Channel, Reader)>,
+    pub(super) watch: DiscoveryWatch,
+    /// The endpoint id of this generation's writers: samples from it are this transport's own.
+    pub(super) local: EndpointId,
+    /// The threads `rustdds` runs for this generation's participants (empty where they cannot be watched).
+    pub(super) engine: Vec<EngineThread>,
+}
+
+pub(super) fn setup(what: impl Into<String>) -> impl FnOnce(rustdds::dds::CreateError) -> TransportError {
+    let what = what.into();
+    move |e| TransportError::Setup { what, detail: format!("{e:?}") }
+}
+
+impl Generation {
+    /// Joins the DDS domain with new participants and creates every topic, writer and reader in them (see
+    /// [`RtpsTransport::new`]); `state` is where the new readers' discovery events are recorded.
+    pub(super) fn build(
+        config: &RtpsConfig,
+        multicast: bool,
+        state: &Arc<DiscoveryState>,
+    ) -> Result<Generation, TransportError> {
+        let networks = if multicast { routable_ipv4_addresses() } else { None };
+        let join = |role: &str| {
+            let mut builder = DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast);
+            if let Some(addresses) = networks.clone() {
+                builder = builder.with_only_networks(addresses);
+            }
+            builder.build().map_err(|e| TransportError::Setup {
+                what: format!("{role} participant in domain {}", config.domain_id),
+                detail: format!("{e:?}"),
+            })
+        };
+        let (publishing, subscribing, engine) = {
+            let _creating = CREATING_PARTICIPANTS.lock().unwrap_or_else(|p| p.into_inner());
+            let before = EngineThread::all();
+            let publishing = join("publishing")?;
+            // Multicast needs the readers apart too: rustdds never routes a writer to its own participant's
+            // readers, and their fallback path would send a second copy.
+            let subscribing =
+                if config.separate_reader_participant || multicast { Some(join("subscribing")?) } else { None };
+            let engine: Vec<EngineThread> = EngineThread::all().into_iter().filter(|t| !before.contains(t)).collect();
+            (publishing, subscribing, engine)
+        };
+        let participants = 1 + usize::from(subscribing.is_some());
+        if engine.len() != 2 * participants {
+            tracing::warn!(
+                "rtps: found {} rustdds threads for {participants} new participant(s), expected {}: a participant \
+                 whose threads end may go unnoticed (no /proc/self/task, or participants created elsewhere in this \
+                 process at the same time)",
+                engine.len(),
+                2 * participants
+            );
+        }
+        let qos = qos(config);
+        let publisher = publishing.create_publisher(&qos).map_err(setup("publisher"))?;
+        let subscriber =
+            subscribing.as_ref().unwrap_or(&publishing).create_subscriber(&qos).map_err(setup("subscriber"))?;
+        let mut writers = Vec::new();
+        let mut readers = Vec::new();
+        let mut endpoints = Vec::new();
+        // The topic of `name` in the publishing participant, and in the subscribing one (the same if none).
+        let topics = |name: &str, qos: &QosPolicies| -> Result<(Topic, Topic), TransportError> {
+            let topic = |participant: &DomainParticipant| {
+                participant
+                    .create_topic(name.to_owned(), "cortex::Envelope".into(), qos, TopicKind::NoKey)
+                    .map_err(setup(format!("topic {name}")))
+            };
+            let written = topic(&publishing)?;
+            let read = match &subscribing {
+                Some(participant) => topic(participant)?,
+                None => written.clone(),
+            };
+            Ok((written, read))
+        };
+        let writer = |topic: &Topic, name: &str, qos: &QosPolicies| {
+            publisher
+                .create_datawriter_no_key::<Payload, OctetsAdapter>(topic, Some(qos.clone()))
+                .map_err(setup(format!("writer of {name}")))
+        };
+        let reader = |topic: &Topic, name: &str, qos: &QosPolicies| {
+            subscriber
+                .create_simple_datareader_no_key::<Payload, OctetsAdapter>(topic, Some(qos.clone()))
+                .map_err(setup(format!("reader of {name}")))
+        };
+        for channel in Channel::ALL {
+            let name = format!("{}_{}", config.topic_prefix, channel.name());
+            let (written, read) = topics(&name, &qos)?;
+            let writer = writer(&written, &name, &qos)?;
+            let reader = reader(&read, &name, &qos)?;
+            endpoints.push((channel, writer.guid(), reader.guid()));
+            writers.push(writer);
+            readers.push((channel, reader));
+        }
+        // Every transport reads the best-effort updates topic, so agents of one graph may mix settings; only a
+        // transport set to best-effort writes on it.
+        let best_effort = {
+            let name = format!("{}_updates_be", config.topic_prefix);
+            let qos = qos_with(config, Reliability::BestEffort);
+            let (written, read) = topics(&name, &qos)?;
+            let reader = reader(&read, &name, &qos)?;
+            let writer = match best_effort_max_bytes(config) {
+                None => None,
+                Some(_) => {
+                    let writer = writer(&written, &name, &qos)?;
+                    endpoints.push((Channel::Updates, writer.guid(), reader.guid()));
+                    Some(writer)
+                }
+            };
+            readers.push((Channel::Updates, reader));
+            writer
+        };
+        // Samples are tagged with their writer's GUID prefix: the publishing participant's.
+        let local = endpoint_of(publishing.guid());
+        // Discovery events of both participants: the writers' matches come from the publishing one, the readers'
+        // from the subscribing one.
+        let mut statuses = vec![publishing.status_listener()];
+        statuses.extend(subscribing.as_ref().map(DomainParticipant::status_listener));
+        let reading_prefix = prefix_of(subscribing.as_ref().unwrap_or(&publishing).guid());
+        let own = vec![prefix_of(publishing.guid()), reading_prefix];
+        let watch = DiscoveryWatch { statuses, own, endpoints, state: Arc::clone(state) };
+        Ok(Generation {
+            writers,
+            best_effort,
+            local,
+            reading_prefix,
+            participants: Participants { _publishing: publishing, _subscribing: subscribing },
+            reading: Reading { readers, watch, local, engine },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::{Duration, Instant};
+
+    use super::*;
+
+    #[test]
+    fn the_threads_of_new_participants_are_found_and_their_end_is_seen() {
+        if std::fs::read_dir("/proc/self/task").is_err() {
+            return; // Not Linux: nothing to watch.
+        }
+        let config = RtpsConfig { domain_id: 94, topic_prefix: "engine_threads".into(), ..RtpsConfig::default() };
+        let generation = Generation::build(&config, false, &Arc::new(DiscoveryState::default())).unwrap();
+        let threads = generation.reading.engine.clone();
+        // Two participants, each with its event loop and its discovery thread.
+        assert_eq!(threads.len(), 4, "{threads:?}");
+        assert_eq!(threads.iter().filter(|t| t.name.starts_with("RustDDS Partici")).count(), 2, "{threads:?}");
+        assert!(threads.iter().all(EngineThread::alive));
+        drop(generation);
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while threads.iter().any(EngineThread::alive) {
+            assert!(Instant::now() < deadline, "threads still running after their participants were dropped");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}

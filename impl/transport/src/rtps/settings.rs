@@ -1,0 +1,161 @@
+//! The transport's settings ([`RtpsConfig`]: multicast, best-effort updates, limits) and the QoS they give every
+//! reader and writer.
+
+use std::time::Duration;
+
+use rustdds::policy::{Durability, History, Reliability, ResourceLimits};
+use rustdds::{QosPolicies, QosPolicyBuilder};
+
+#[cfg(doc)]
+use super::RtpsTransport;
+#[cfg(doc)]
+use crate::Channel;
+
+/// Whether user data to several same-host readers goes out once, as multicast (see the module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Multicast {
+    /// [`Multicast::On`] when the loopback interface is up and multicast-capable, [`Multicast::Off`] otherwise.
+    #[default]
+    Auto,
+    /// Same-host readers share one multicast datagram (`rustdds` `same_host_loopback(false)`). Discovery then
+    /// needs a multicast-capable interface, since the unicast "localhost peers" announcements are off too. Each
+    /// transport runs two participants (see [`RtpsTransport::new`]); `rustdds` allows 120 participants per domain
+    /// and host, so at most 60 such transports share a domain on one host.
+    On,
+    /// `rustdds`'s default: a reader confirmed to be on this host gets its own unicast copy over loopback.
+    Off,
+}
+
+impl Multicast {
+    /// Whether this setting means multicast on this host now (`Auto` asks [`loopback_multicast_capable`]).
+    pub fn resolve(self) -> bool {
+        match self {
+            Multicast::Auto => loopback_multicast_capable(),
+            Multicast::On => true,
+            Multicast::Off => false,
+        }
+    }
+}
+
+/// Whether a loopback interface with an IPv4 address is up and multicast-capable in this network namespace,
+/// as `rustdds` sees interfaces (the same `netdev` enumeration), so that it joins its multicast groups on it.
+pub fn loopback_multicast_capable() -> bool {
+    netdev::get_interfaces()
+        .iter()
+        .any(|iface| iface.is_loopback() && iface.is_up() && iface.is_multicast() && !iface.ipv4.is_empty())
+}
+
+/// This host's IPv4 addresses outside `127.0.0.0/8`, if it has any: what a multicast participant advertises.
+pub fn routable_ipv4_addresses() -> Option<Vec<std::net::IpAddr>> {
+    let addresses: Vec<std::net::IpAddr> = netdev::get_interfaces()
+        .iter()
+        .filter(|iface| iface.is_up())
+        .flat_map(|iface| iface.ipv4.iter().map(|net| net.addr()))
+        .filter(|addr| !addr.is_loopback())
+        .map(std::net::IpAddr::V4)
+        .collect();
+    (!addresses.is_empty()).then_some(addresses)
+}
+
+/// Settings of an [`RtpsTransport`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RtpsConfig {
+    /// DDS domain id (0..=232 with the standard port mapping).
+    pub domain_id: u16,
+    /// Prefix of the topic names, so that several graphs can share a domain.
+    pub topic_prefix: String,
+    /// `ResourceLimits::max_samples` of every reader and writer.
+    pub max_samples: i32,
+    /// Samples the inbox holds before the receiving thread stops taking from the readers.
+    pub inbox_capacity: usize,
+    /// Largest sample accepted for publishing.
+    pub max_sample_bytes: usize,
+    /// Samples at least this large count towards pacing.
+    pub large_sample_bytes: usize,
+    /// After this many bytes of large samples, wait for acknowledgements before writing more.
+    pub pace_bytes: usize,
+    /// Longest wait for acknowledgements when pacing, and longest blocking of a write on a full send window.
+    pub max_blocking: Duration,
+    /// Create the readers in a second DDS participant, so that no writer has a reader in its own participant (see
+    /// the module documentation: with one shared participant, fragmented samples are sent twice to same-host
+    /// readers and delivery stalls). `false` keeps one participant per transport, for comparison only.
+    pub separate_reader_participant: bool,
+    /// One multicast datagram for all same-host readers, or one unicast copy each.
+    pub multicast: Multicast,
+    /// How samples on [`Channel::Updates`] travel: reliable like every other channel, or small ones best-effort.
+    pub updates: UpdateDelivery,
+}
+
+/// How samples on [`Channel::Updates`] travel (see the module documentation, "Best-effort updates").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum UpdateDelivery {
+    /// Reliable, like every other channel. `rustdds` puts a heartbeat that asks for an acknowledgement beside every
+    /// DATA, so every matched reader — the writer's own transport's reader included — acknowledges every sample.
+    #[default]
+    Reliable,
+    /// Samples of at most `max_bytes` go on a best-effort topic of their own (`{prefix}_updates_be`): no heartbeat,
+    /// no acknowledgement, no repair by the DDS engine. Larger samples stay reliable. Whoever uses this repairs
+    /// losses itself: agents do, by anti-entropy and by asking a peer at once when a delta shows a gap.
+    BestEffort {
+        /// The largest sample sent best-effort (keep it below one datagram: a lost fragment loses the sample).
+        max_bytes: usize,
+    },
+}
+
+impl UpdateDelivery {
+    /// Best-effort for samples up to 1 KB, which stay one datagram on any usual path MTU.
+    pub const BEST_EFFORT_SMALL: UpdateDelivery = UpdateDelivery::BestEffort { max_bytes: 1024 };
+
+    /// The name used on command lines and in reports: `reliable` or `best-effort`.
+    pub fn name(self) -> &'static str {
+        match self {
+            UpdateDelivery::Reliable => "reliable",
+            UpdateDelivery::BestEffort { .. } => "best-effort",
+        }
+    }
+}
+
+impl Default for RtpsConfig {
+    fn default() -> Self {
+        RtpsConfig {
+            domain_id: 0,
+            topic_prefix: "dsr".into(),
+            max_samples: 100_000,
+            inbox_capacity: 65_536,
+            max_sample_bytes: 256 << 20,
+            large_sample_bytes: 64 << 10,
+            pace_bytes: 4 << 20,
+            max_blocking: Duration::from_secs(2),
+            separate_reader_participant: true,
+            multicast: Multicast::Auto,
+            updates: UpdateDelivery::Reliable,
+        }
+    }
+}
+
+/// The largest best-effort sample of `config`, if its updates go best-effort.
+pub(super) fn best_effort_max_bytes(config: &RtpsConfig) -> Option<usize> {
+    match config.updates {
+        UpdateDelivery::Reliable => None,
+        UpdateDelivery::BestEffort { max_bytes } => Some(max_bytes),
+    }
+}
+
+/// The QoS of every reader and writer: reliable, keep-all, volatile, explicit resource limits.
+pub fn qos(config: &RtpsConfig) -> QosPolicies {
+    qos_with(config, Reliability::Reliable { max_blocking_time: config.max_blocking.into() })
+}
+
+/// [`qos`] with another reliability (the best-effort updates topic).
+pub(super) fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPolicies {
+    QosPolicyBuilder::new()
+        .reliability(reliability)
+        .history(History::KeepAll)
+        .durability(Durability::Volatile)
+        .resource_limits(ResourceLimits {
+            max_samples: config.max_samples,
+            max_instances: 1,
+            max_samples_per_instance: config.max_samples,
+        })
+        .build()
+}
