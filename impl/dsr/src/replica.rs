@@ -12,17 +12,12 @@ use smallvec::SmallVec;
 
 use crate::causal::CausalContext;
 use crate::delta::{Delta, DeltaParts, Origin};
-use crate::dictionary::{AttrKey, Dictionary, MAX_NAME_LEN};
+use crate::dictionary::{AttrKey, Dictionary};
 use crate::error::{DeltaError, DictionaryError, OpError};
-use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};
+use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp, valid_node_name};
 use crate::mutants::{DsrMutant, Plant};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store, drop_covered_attrs, join_attrs};
 use crate::value::{AttrType, Value};
-
-/// Whether `name` is acceptable as a node name: 1 to 255 bytes, no control characters, no `#`.
-pub fn valid_node_name(name: &str) -> bool {
-    !name.is_empty() && name.len() <= MAX_NAME_LEN && !name.contains('#') && !name.chars().any(char::is_control)
-}
 
 /// A node to insert.
 #[derive(Clone, Debug)]
