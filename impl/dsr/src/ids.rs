@@ -172,6 +172,24 @@ impl fmt::Display for Element {
     }
 }
 
+impl From<NodeId> for Element {
+    fn from(id: NodeId) -> Self {
+        Element::Node(id)
+    }
+}
+
+impl From<EdgeKey> for Element {
+    fn from(key: EdgeKey) -> Self {
+        Element::Edge(key)
+    }
+}
+
+impl From<&EdgeKey> for Element {
+    fn from(key: &EdgeKey) -> Self {
+        Element::Edge(key.clone())
+    }
+}
+
 /// The longest name accepted (node names, type names, attribute names), in bytes.
 pub const MAX_NAME_LEN: usize = 255;
 
