@@ -259,7 +259,7 @@ impl Replica {
     }
 
     /// Brings the edge indices up to date for edge entries that appeared or went.
-    pub(super) fn reindex_edges(&mut self, keys: &[EdgeKey]) {
+    fn reindex_edges(&mut self, keys: &[EdgeKey]) {
         for key in keys {
             if self.store.edges.contains_key(key) {
                 self.out_edges.entry(key.from).or_default().insert(key.clone());
@@ -278,7 +278,7 @@ impl Replica {
     }
 
     /// Brings the name index up to date for nodes whose core changed or that were deleted.
-    pub(super) fn reindex_names(&mut self, ids: &[NodeId]) {
+    fn reindex_names(&mut self, ids: &[NodeId]) {
         for id in ids {
             let stale_kept = self.plant.is(DsrMutant::NameKeptByDeletedHolder)
                 && self.store.tombstones.contains(id)
@@ -308,7 +308,7 @@ impl Replica {
 
 /// Puts a register in the form the general join leaves when it joins the register into an empty one: sorted by
 /// dot, the first of repeated dots kept.
-pub(super) fn normalize_register<T>(register: &mut Register<T>) {
+fn normalize_register<T>(register: &mut Register<T>) {
     if register.values.windows(2).all(|pair| pair[0].dot < pair[1].dot) {
         return;
     }
@@ -317,7 +317,7 @@ pub(super) fn normalize_register<T>(register: &mut Register<T>) {
 }
 
 /// [`normalize_register`] for every register; empty registers go (the general join never inserts one).
-pub(super) fn normalize_attrs(attrs: &mut Attrs) {
+fn normalize_attrs(attrs: &mut Attrs) {
     attrs.retain(|_, register| {
         normalize_register(register);
         !register.is_empty()
@@ -325,7 +325,7 @@ pub(super) fn normalize_attrs(attrs: &mut Attrs) {
 }
 
 /// A map of sets from `(key, item)` pairs sorted by key then item, each built in one go.
-pub(super) fn group_sorted<K: Ord, T: Ord>(pairs: impl Iterator<Item = (K, T)>) -> BTreeMap<K, BTreeSet<T>> {
+fn group_sorted<K: Ord, T: Ord>(pairs: impl Iterator<Item = (K, T)>) -> BTreeMap<K, BTreeSet<T>> {
     let mut groups: Vec<(K, Vec<T>)> = Vec::new();
     for (key, item) in pairs {
         match groups.last_mut() {

@@ -50,32 +50,28 @@ impl NewNode {
 
 impl Replica {
     /// The shared name of an attribute, registering it (copy-on-write) if it is new and allowed.
-    pub(super) fn intern_attr(
-        &mut self,
-        name: &str,
-        value_type: crate::value::ValueType,
-    ) -> Result<Name, DictionaryError> {
+    fn intern_attr(&mut self, name: &str, value_type: crate::value::ValueType) -> Result<Name, DictionaryError> {
         match self.dictionary.known_attr(name, value_type)? {
             Some(known) => Ok(known),
             None => Arc::make_mut(&mut self.dictionary).check_attr(name, value_type),
         }
     }
 
-    pub(super) fn intern_node_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
+    fn intern_node_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
         match self.dictionary.known_node_type(name) {
             Some(known) => Ok(known),
             None => Arc::make_mut(&mut self.dictionary).check_node_type(name),
         }
     }
 
-    pub(super) fn intern_edge_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
+    fn intern_edge_type(&mut self, name: &str) -> Result<Name, DictionaryError> {
         match self.dictionary.known_edge_type(name) {
             Some(known) => Ok(known),
             None => Arc::make_mut(&mut self.dictionary).check_edge_type(name),
         }
     }
 
-    pub(super) fn tick(&mut self, now_ns: u64) -> Stamp {
+    fn tick(&mut self, now_ns: u64) -> Stamp {
         if self.plant.is(DsrMutant::StampTiesPhysicalClock) && now_ns >= self.clock.0 {
             self.clock = Stamp(now_ns);
             return self.clock;
@@ -84,11 +80,11 @@ impl Replica {
         self.clock
     }
 
-    pub(super) fn next_counter(&self) -> u64 {
+    fn next_counter(&self) -> u64 {
         self.ctx.max_counter(self.id) + 1
     }
 
-    pub(super) fn element_attrs(&self, element: &Element) -> Result<&Attrs, OpError> {
+    fn element_attrs(&self, element: &Element) -> Result<&Attrs, OpError> {
         match element {
             Element::Node(id) if self.node_visible(*id) => Ok(&self.store.nodes[id].attrs),
             Element::Edge(key) if self.edge_visible(key) => Ok(&self.store.edges[key].attrs),
@@ -97,7 +93,7 @@ impl Replica {
     }
 
     /// Builds the delta of a local operation from its generated dots and store, then joins it.
-    pub(super) fn commit(&mut self, first: u64, last: u64, mut ctx: CausalContext, store: Store) -> Arc<Delta> {
+    fn commit(&mut self, first: u64, last: u64, mut ctx: CausalContext, store: Store) -> Arc<Delta> {
         for counter in first..=last {
             ctx.insert(Dot::new(self.id, counter));
         }
@@ -177,11 +173,11 @@ impl Replica {
         Ok((id, delta))
     }
 
-    pub(super) fn id_known(&self, id: NodeId) -> bool {
+    fn id_known(&self, id: NodeId) -> bool {
         self.store.tombstones.contains(&id) || self.store.nodes.contains_key(&id)
     }
 
-    pub(super) fn mint_node_id(&mut self) -> Result<NodeId, OpError> {
+    fn mint_node_id(&mut self) -> Result<NodeId, OpError> {
         loop {
             let sequence = self.minted_nodes.checked_add(1).ok_or(OpError::IdSpaceExhausted)?;
             self.minted_nodes = sequence;
@@ -383,7 +379,7 @@ impl Replica {
     }
 }
 
-pub(super) fn element_store(element: &Element, registers: Attrs) -> Store {
+fn element_store(element: &Element, registers: Attrs) -> Store {
     let mut store = Store::default();
     match element {
         Element::Node(id) => {

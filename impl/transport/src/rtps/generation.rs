@@ -42,7 +42,7 @@ pub(super) struct Reading {
     pub(super) engine: Vec<EngineThread>,
 }
 
-pub(super) fn setup(what: impl Into<String>) -> impl FnOnce(rustdds::dds::CreateError) -> TransportError {
+fn setup(what: impl Into<String>) -> impl FnOnce(rustdds::dds::CreateError) -> TransportError {
     let what = what.into();
     move |e| TransportError::Setup { what, detail: format!("{e:?}") }
 }
