@@ -19,7 +19,7 @@ use transport::SystemClock;
 use transport::rtps::{RtpsConfig, RtpsTransport};
 
 use crate::objects::{AttrMap, Attribute, Edge, EdgeMap, LOCAL_AGENT_ID, Node};
-use crate::signals::SignalHub;
+use crate::signals::{SignalHub, SignalType};
 
 /// An edge to insert with a node: destination, type, attributes.
 type EdgeToInsert = (u64, String, Vec<(String, Value)>);
@@ -650,4 +650,12 @@ impl DsrGraph {
 /// The agent behind a graph object, for the rt and inner APIs and the signals.
 pub fn agent_of(graph: &Bound<'_, DsrGraph>) -> PyResult<Arc<GraphAgent>> {
     graph.get().agent()
+}
+
+/// `signals.connect(g, kind, callback)`: calls `callback` on the agent's signal thread for every change of that
+/// kind (see [`crate::signals`]).
+#[pyfunction(name = "connect")]
+pub fn connect_signal(graph: &Bound<'_, DsrGraph>, kind: SignalType, callback: Bound<'_, PyAny>) -> PyResult<()> {
+    let agent = agent_of(graph)?;
+    Arc::clone(&graph.get().hub).connect(agent, kind, callback)
 }

@@ -41,7 +41,7 @@ fn cortex_dsr(py: Python<'_>, module: &Bound<'_, PyModule>) -> PyResult<()> {
     for (kind, name) in signals::SignalType::ALL {
         signals.add(name, kind)?;
     }
-    signals.add_function(wrap_pyfunction!(signals::connect, &signals)?)?;
+    signals.add_function(wrap_pyfunction!(graph::connect_signal, &signals)?)?;
     signals.add_function(wrap_pyfunction!(signals::_shutdown, &signals)?)?;
     module.add_submodule(&signals)?;
     // `import cortex_dsr.signals` and `from cortex_dsr.signals import ...` find the submodule too.

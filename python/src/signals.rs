@@ -13,13 +13,12 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use agent::ChangeSignal;
+use agent::{Agent, ChangeSignal};
 use crossbeam_channel::RecvTimeoutError;
 use dsr::{Change, EdgeKey, Element, NodeId};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
-
-use crate::graph::{DsrGraph, GraphAgent, agent_of};
+use transport::Transport;
 
 /// Most undelivered changes kept per graph for the dispatcher (beyond it the agent drops and counts them).
 const SIGNAL_QUEUE: usize = 65_536;
@@ -110,7 +109,7 @@ impl Event {
 /// one event with every name, preceded, as in pydsr, by the element's `UPDATE_NODE` / `UPDATE_EDGE` (once per
 /// element in the batch: an insert's own signal stands for it). Node types are read from `agent` (the GIL is not
 /// held here).
-fn events(agent: &GraphAgent, batch: Vec<ChangeSignal>) -> Vec<Event> {
+fn events<T: Transport>(agent: &Agent<T>, batch: Vec<ChangeSignal>) -> Vec<Event> {
     let node_type = |id: NodeId| agent.read(|r| r.node(id).map(|n| n.node_type().to_owned())).flatten();
     let mut out: Vec<Event> = Vec::with_capacity(batch.len());
     for signal in batch {
@@ -218,7 +217,24 @@ impl SignalHub {
         self.stop.store(true, Ordering::SeqCst);
     }
 
-    fn start(self: &Arc<Self>, agent: Arc<GraphAgent>) -> PyResult<()> {
+    /// Adds `callback` for changes of `kind` and starts the dispatcher of `agent`'s changes if it is not running.
+    ///
+    /// # Errors
+    /// A Python `TypeError` if `callback` is not callable; an error if the dispatcher thread cannot start.
+    pub fn connect<T: Transport>(
+        self: &Arc<Self>,
+        agent: Arc<Agent<T>>,
+        kind: SignalType,
+        callback: Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        if !callback.is_callable() {
+            return Err(PyTypeError::new_err("the callback must be callable"));
+        }
+        self.callbacks.lock().unwrap_or_else(|p| p.into_inner()).push((kind, callback.unbind()));
+        self.start(agent)
+    }
+
+    fn start<T: Transport>(self: &Arc<Self>, agent: Arc<Agent<T>>) -> PyResult<()> {
         if self.started.swap(true, Ordering::SeqCst) {
             return Ok(());
         }
@@ -268,18 +284,6 @@ impl SignalHub {
         dispatchers.push(handle);
         Ok(())
     }
-}
-
-/// `connect(g, kind, callback)`: calls `callback` on the agent's signal thread for every change of that kind.
-#[pyfunction]
-pub fn connect(graph: &Bound<'_, DsrGraph>, kind: SignalType, callback: Bound<'_, PyAny>) -> PyResult<()> {
-    if !callback.is_callable() {
-        return Err(PyTypeError::new_err("the callback must be callable"));
-    }
-    let agent = agent_of(graph)?;
-    let hub = Arc::clone(&graph.get().hub);
-    hub.callbacks.lock().unwrap_or_else(|p| p.into_inner()).push((kind, callback.unbind()));
-    hub.start(agent)
 }
 
 /// Stops every dispatcher and waits for them (registered with `atexit`), so none calls into a finalizing

@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 
 use agent::{Agent, AgentConfig, AgentId};
 use anyhow::{Context, Result, anyhow, bail};
+use bica::clock::ns_from_ms;
 use bica::prelude::*;
 use bica::service::{Service, ServiceBuilder};
 use clap::{Args, ValueEnum};
@@ -396,10 +397,6 @@ pub fn play_log(
     Ok(played)
 }
 
-fn ms(period_ms: u64) -> u64 {
-    period_ms.max(1) * 1_000_000
-}
-
 /// Starts `role`'s runtime on its own thread, over `agent`'s graph; returns it with its named methods.
 fn start_role(
     role: Role,
@@ -435,8 +432,10 @@ fn start_role(
                 perception::roles::attention(runtime, graph, &sensor, StimulusKind::Blob { class: 0 }, period_ms)
             }
             Role::FixtureCamera => {
-                runtime
-                    .register(FixtureCamera { graph, name: sensor, node: None, frames, written: 0 }, ms(period_ms))?;
+                runtime.register(
+                    FixtureCamera { graph, name: sensor, node: None, frames, written: 0 },
+                    ns_from_ms(period_ms.max(1)),
+                )?;
                 return runtime.activate::<FixtureCamera>();
             }
             Role::Bridge => return Err(failed("the bridge role runs no BICA tree".into())),

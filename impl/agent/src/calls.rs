@@ -20,25 +20,9 @@ use std::time::Duration;
 
 use bytes::Bytes;
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
-use serde::{Deserialize, Serialize};
 
 use crate::AgentId;
-use crate::envelope::Message;
-
-/// Why the serving agent could not answer with a response (sent in a call reply).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum CallFault {
-    /// The server has no method of that name.
-    UnknownMethod(String),
-    /// The request bytes do not decode as the method's request.
-    BadRequest(String),
-    /// The method ran and failed.
-    Failed(String),
-    /// The server's queue is full or it has stopped; nothing ran.
-    Busy(String),
-    /// The agent serves no calls (no BICA runtime attached).
-    NoRuntime(String),
-}
+use crate::envelope::{CallFault, Message};
 
 /// Why a call gave no response. Messages say which agent, which method and what happened.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -15,7 +15,21 @@ use dsr::{CausalContext, Dot, ReplicaId};
 use serde::{Deserialize, Serialize};
 
 use crate::AgentId;
-use crate::calls::CallFault;
+
+/// Why the serving agent could not answer with a response (sent in a call reply).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CallFault {
+    /// The server has no method of that name.
+    UnknownMethod(String),
+    /// The request bytes do not decode as the method's request.
+    BadRequest(String),
+    /// The method ran and failed.
+    Failed(String),
+    /// The server's queue is full or it has stopped; nothing ran.
+    Busy(String),
+    /// The agent serves no calls (no BICA runtime attached).
+    NoRuntime(String),
+}
 
 /// First byte of every envelope: a foreign sample on our topics is recognised at once.
 pub const MAGIC: u8 = 0xD5;

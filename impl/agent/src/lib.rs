@@ -60,7 +60,8 @@ pub mod mutants;
 pub mod status;
 
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline, StatusLine};
-pub use calls::{CallError, CallFault, CallReplier, CallServer, PendingCall};
+pub use calls::{CallError, CallReplier, CallServer, PendingCall};
+pub use envelope::CallFault;
 
 /// A CORTEX agent id (12 bits: 0..4096).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]

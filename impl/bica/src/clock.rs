@@ -1,10 +1,25 @@
 //! Injected time. The scheduler core never reads a clock: drivers pass it readings taken
 //! from a [`Clock`]. [`MonotonicClock`] is the real one; [`VirtualClock`] is advanced
-//! explicitly so tests and the model checker decide every duration.
+//! explicitly so tests and the model checker decide every duration. Times and periods are `u64` nanoseconds
+//! (`_ns`); [`ns_from_ms`] is the one conversion from milliseconds.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
+
+/// Nanoseconds in a millisecond: the scheduler's clock and periods count nanoseconds, people and command lines
+/// milliseconds.
+pub const NS_PER_MS: u64 = 1_000_000;
+
+/// A duration of `ms` milliseconds in the scheduler's unit, nanoseconds (saturating at `u64::MAX`, some 584
+/// years).
+///
+/// ```
+/// assert_eq!(bica::clock::ns_from_ms(33), 33_000_000);
+/// ```
+pub fn ns_from_ms(ms: u64) -> u64 {
+    ms.saturating_mul(NS_PER_MS)
+}
 
 /// A source of time for the runtime driver and for step measurements.
 pub trait Clock {

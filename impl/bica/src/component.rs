@@ -15,8 +15,9 @@ use std::hash::{BuildHasherDefault, Hasher};
 use std::marker::PhantomData;
 
 use crate::clock::Clock;
-use crate::core::{ComponentId, Gate, SchedulerCore};
-use crate::debug::Debuggable;
+use crate::component_id::ComponentId;
+use crate::core::{Gate, SchedulerCore};
+use crate::debug_primitives::Debuggable;
 use crate::error::BicaError;
 use crate::stats::Statistics;
 use crate::trace::Caller;

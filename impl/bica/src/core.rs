@@ -38,18 +38,9 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::component_id::ComponentId;
 use crate::error::BicaError;
 use crate::trace::{Caller, MissEvent, TraceBuffer, TraceEvent};
-
-/// Index of a registered component; stable for the life of the scheduler.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-pub struct ComponentId(pub u32);
-
-impl ComponentId {
-    fn index(self) -> usize {
-        self.0 as usize
-    }
-}
 
 /// A deliberately planted scheduler bug, for checking that tests and the model catch it.
 #[cfg(feature = "mutants")]

@@ -2,7 +2,7 @@
 //! full request queue) is reported through [`BicaError`] instead of a panic, so a
 //! robot keeps running when one component is misused.
 
-use crate::core::ComponentId;
+use crate::component_id::ComponentId;
 
 /// Everything that can go wrong when registering, stepping or reaching a component.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -68,8 +68,10 @@
 
 pub mod clock;
 pub mod component;
+pub mod component_id;
 pub mod core;
 pub mod debug;
+pub mod debug_primitives;
 pub mod error;
 pub mod fsm;
 pub mod remote;
@@ -87,8 +89,10 @@ pub use crate::runtime::{Driver, RunOutcome, Runtime, RuntimeConfig};
 pub mod prelude {
     pub use crate::clock::{Clock, MonotonicClock, VirtualClock};
     pub use crate::component::{Component, Handle, Registry, StepContext, Stepped};
-    pub use crate::core::{ComponentId, Decision, Gate, SchedulerConfig, SchedulerCore};
-    pub use crate::debug::{DebugCollector, Debuggable};
+    pub use crate::component_id::ComponentId;
+    pub use crate::core::{Decision, Gate, SchedulerConfig, SchedulerCore};
+    pub use crate::debug::DebugCollector;
+    pub use crate::debug_primitives::Debuggable;
     pub use crate::error::BicaError;
     pub use crate::fsm::Fsm;
     pub use crate::remote::RemoteHandle;

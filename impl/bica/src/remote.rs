@@ -6,7 +6,8 @@
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 
 use crate::component::{Component, Registry};
-use crate::core::{ComponentId, SchedulerCore};
+use crate::component_id::ComponentId;
+use crate::core::SchedulerCore;
 use crate::error::BicaError;
 use crate::stats::{Statistics, StatisticsReport};
 
@@ -48,7 +49,7 @@ impl Control<'_> {
 
     /// Current statistics.
     pub fn statistics(&self) -> StatisticsReport {
-        self.stats.report(self.registry, self.core, self.now_ns)
+        self.stats.report(|id| self.registry.name(id).ok(), self.core, self.now_ns)
     }
 }
 

@@ -10,7 +10,8 @@ use std::time::Duration;
 
 use crate::clock::{Clock, MonotonicClock};
 use crate::component::{Component, Handle, ListChange, Registry, StepContext, run_one};
-use crate::core::{ComponentId, Decision, Gate, SchedulerConfig, SchedulerCore};
+use crate::component_id::ComponentId;
+use crate::core::{Decision, Gate, SchedulerConfig, SchedulerCore};
 use crate::error::BicaError;
 use crate::remote::{Control, RemoteHandle, Request, request_queue};
 use crate::stats::{Statistics, StatisticsReport};
@@ -168,7 +169,7 @@ impl<C: Clock> Runtime<C> {
 
     /// Current statistics of every component.
     pub fn statistics(&self) -> StatisticsReport {
-        self.stats.report(&self.registry, &self.core, self.clock.now_ns())
+        self.stats.report(|id| self.registry.name(id).ok(), &self.core, self.clock.now_ns())
     }
 
     /// Returns (and logs through `tracing`) a statistics report if the report interval has passed.

@@ -43,7 +43,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::component::Component;
-use crate::core::ComponentId;
+use crate::component_id::ComponentId;
 use crate::debug::DebugCollector;
 use crate::error::BicaError;
 use crate::remote::{Control, RemoteHandle};

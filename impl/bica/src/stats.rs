@@ -8,8 +8,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use crate::component::Registry;
-use crate::core::{ComponentCounters, ComponentId, RunInfo, SchedulerCore};
+use crate::component_id::ComponentId;
+use crate::core::{ComponentCounters, RunInfo, SchedulerCore};
 
 /// Recent samples kept per component for percentiles.
 pub const SAMPLE_RING_CAPACITY: usize = 1024;
@@ -135,8 +135,13 @@ impl Statistics {
         series.last_run_ns = started_ns;
     }
 
-    /// Builds a report of every registered component.
-    pub fn report(&self, registry: &Registry, core: &SchedulerCore, now_ns: u64) -> StatisticsReport {
+    /// Builds a report of every registered component, named by `name_of` (the registry's type names).
+    pub fn report(
+        &self,
+        name_of: impl Fn(ComponentId) -> Option<&'static str>,
+        core: &SchedulerCore,
+        now_ns: u64,
+    ) -> StatisticsReport {
         let components = (0..core.component_count())
             .map(|index| {
                 let id = ComponentId(u32::try_from(index).expect("invariant: ids fit in u32"));
@@ -150,7 +155,7 @@ impl Statistics {
                 };
                 let period_ns = core.period_ns(id).expect("invariant: index is registered");
                 ComponentReport {
-                    name: registry.name(id).unwrap_or("?").to_owned(),
+                    name: name_of(id).unwrap_or("?").to_owned(),
                     active: core.is_active(id),
                     nominal_hz: 1e9 / period_ns as f64,
                     achieved_hz,

@@ -5,7 +5,7 @@ use std::collections::VecDeque;
 
 use serde::{Deserialize, Serialize};
 
-use crate::core::ComponentId;
+use crate::component_id::ComponentId;
 
 /// Who asked for a step: the scheduler (top-level) or another component (cascade).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -667,7 +667,7 @@ impl<'de> Reader<'de> {
             let (node_type, name): (&str, &str) = self.take(place)?;
             let dot = decoder.stored_dot(dot, &place)?;
             check_type_name(place, "node type", node_type)?;
-            if !crate::replica::valid_node_name(name) {
+            if !crate::ids::valid_node_name(name) {
                 return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
             }
             if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == dot) {

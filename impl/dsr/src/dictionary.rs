@@ -23,6 +23,7 @@ use std::sync::Arc;
 use bytes::Bytes;
 
 use crate::error::DictionaryError;
+pub use crate::ids::MAX_NAME_LEN;
 use crate::ids::Name;
 use crate::value::{AttrType, ValueType};
 
@@ -507,9 +508,6 @@ pub(crate) fn interned_attr(code: u16) -> Option<Name> {
 pub(crate) fn intern_type(text: &str) -> Name {
     INTERNED.types.get(text).cloned().unwrap_or_else(|| Name::new(text))
 }
-
-/// The longest name accepted, in bytes.
-pub const MAX_NAME_LEN: usize = 255;
 
 /// Checks that a name can be held: 1 to [`MAX_NAME_LEN`] bytes, no control characters.
 pub(crate) fn validate_name(what: &'static str, name: &str) -> Result<(), DictionaryError> {

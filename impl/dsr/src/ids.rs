@@ -171,3 +171,29 @@ impl fmt::Display for Element {
         }
     }
 }
+
+impl From<NodeId> for Element {
+    fn from(id: NodeId) -> Self {
+        Element::Node(id)
+    }
+}
+
+impl From<EdgeKey> for Element {
+    fn from(key: EdgeKey) -> Self {
+        Element::Edge(key)
+    }
+}
+
+impl From<&EdgeKey> for Element {
+    fn from(key: &EdgeKey) -> Self {
+        Element::Edge(key.clone())
+    }
+}
+
+/// The longest name accepted (node names, type names, attribute names), in bytes.
+pub const MAX_NAME_LEN: usize = 255;
+
+/// Whether `name` is acceptable as a node name: 1 to 255 bytes, no control characters, no `#`.
+pub fn valid_node_name(name: &str) -> bool {
+    !name.is_empty() && name.len() <= MAX_NAME_LEN && !name.contains('#') && !name.chars().any(char::is_control)
+}

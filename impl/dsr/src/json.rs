@@ -101,9 +101,10 @@ use serde::{Serialize, Serializer};
 use crate::delta::Delta;
 use crate::dictionary::Dictionary;
 use crate::error::{DictionaryError, OpError};
+use crate::ids::valid_node_name;
 use crate::ids::{EdgeKey, NodeId};
 use crate::kinematics::RT;
-use crate::replica::{NewNode, Replica, valid_node_name};
+use crate::replica::{NewNode, Replica};
 use crate::value::{Value, ValueType};
 
 /// Attributes of a node or link, by name.

@@ -7,6 +7,7 @@
 //! agents work; the writers it needs are [`crate::sensors::write_image`], [`crate::sensors::write_scan`] and
 //! [`crate::sensors::write_cloud`].
 
+use bica::clock::ns_from_ms;
 use bica::debug::DebugCollector;
 use bica::prelude::*;
 
@@ -39,10 +40,6 @@ pub enum RoleError {
     },
 }
 
-fn ms(period_ms: u64) -> u64 {
-    period_ms * 1_000_000
-}
-
 fn prepare(role: &'static str, graph: &SharedGraph) -> Result<(), RoleError> {
     declare_perception_attrs(&mut *graph.borrow_mut()).map_err(|source| RoleError::Graph { role, source })
 }
@@ -62,13 +59,13 @@ pub fn camera_detector<C: Clock>(
     let role = "camera-detector";
     prepare(role, &graph)?;
     let build = |runtime: &mut Runtime<C>| -> Result<(), BicaError> {
-        runtime.register(CameraReader::new(graph.clone(), camera_node), ms(period_ms))?;
-        let labeller = runtime.register(ColourLabeller::new(tables), ms(period_ms))?;
-        let detector = runtime.register(BlobDetector::new(graph.clone(), blobs), ms(period_ms))?;
+        runtime.register(CameraReader::new(graph.clone(), camera_node), ns_from_ms(period_ms))?;
+        let labeller = runtime.register(ColourLabeller::new(tables), ns_from_ms(period_ms))?;
+        let detector = runtime.register(BlobDetector::new(graph.clone(), blobs), ns_from_ms(period_ms))?;
         let mut collector = DebugCollector::new(10_000);
         collector.mark(labeller.id());
         collector.mark(detector.id());
-        runtime.register(collector, ms(period_ms.max(100)))?;
+        runtime.register(collector, ns_from_ms(period_ms.max(100)))?;
         runtime.activate::<BlobDetector>()?;
         runtime.activate::<DebugCollector>()
     };
@@ -89,11 +86,11 @@ pub fn laser_detector<C: Clock>(
     let role = "laser-detector";
     prepare(role, &graph)?;
     let build = |runtime: &mut Runtime<C>| -> Result<(), BicaError> {
-        runtime.register(LaserReader::new(graph.clone(), laser_node), ms(period_ms))?;
-        let detector = runtime.register(LaserObstacleDetector::new(graph.clone(), config), ms(period_ms))?;
+        runtime.register(LaserReader::new(graph.clone(), laser_node), ns_from_ms(period_ms))?;
+        let detector = runtime.register(LaserObstacleDetector::new(graph.clone(), config), ns_from_ms(period_ms))?;
         let mut collector = DebugCollector::new(10_000);
         collector.mark(detector.id());
-        runtime.register(collector, ms(period_ms.max(100)))?;
+        runtime.register(collector, ns_from_ms(period_ms.max(100)))?;
         runtime.activate::<LaserObstacleDetector>()?;
         runtime.activate::<DebugCollector>()
     };
@@ -115,19 +112,19 @@ pub fn attention<C: Clock>(
     let role = "attention";
     prepare(role, &graph)?;
     let build = |runtime: &mut Runtime<C>| -> Result<(), BicaError> {
-        runtime.register(GraphStimuli::new(graph.clone(), head_node), ms(period_ms))?;
+        runtime.register(GraphStimuli::new(graph.clone(), head_node), ns_from_ms(period_ms))?;
         let mut attention = Attention::new().with_source::<GraphStimuli>(StimulusKind::Obstacle);
         if stimulus != StimulusKind::Obstacle {
             attention = attention.with_source::<GraphStimuli>(stimulus);
         }
-        let attention = runtime.register(attention, ms(period_ms))?;
-        let head = runtime.register(Head::new(graph.clone(), head_node), ms(period_ms))?;
-        runtime.register(Scanner::new(graph.clone(), head_node, 1.0, 0.1), ms(period_ms))?;
-        runtime.register(search_track(stimulus, 1, 1_000_000_000)?, ms(period_ms))?;
+        let attention = runtime.register(attention, ns_from_ms(period_ms))?;
+        let head = runtime.register(Head::new(graph.clone(), head_node), ns_from_ms(period_ms))?;
+        runtime.register(Scanner::new(graph.clone(), head_node, 1.0, 0.1), ns_from_ms(period_ms))?;
+        runtime.register(search_track(stimulus, 1, 1_000_000_000)?, ns_from_ms(period_ms))?;
         let mut collector = DebugCollector::new(1000);
         collector.mark(attention.id());
         collector.mark(head.id());
-        runtime.register(collector, ms(period_ms.max(100)))?;
+        runtime.register(collector, ns_from_ms(period_ms.max(100)))?;
         runtime.activate::<SearchTrackFsm>()?;
         runtime.activate::<DebugCollector>()
     };

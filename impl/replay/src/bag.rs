@@ -16,7 +16,7 @@ use std::sync::Arc;
 
 use bytes::Bytes;
 
-use crate::log::{
+use crate::contents::{
     BAG_MAGIC, Channel, Contents, Damage, DamageKind, Failure, Fields, Message, Place, ReadOptions, Schema, decompress,
 };
 

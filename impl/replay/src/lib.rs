@@ -21,6 +21,7 @@
 
 pub mod bag;
 pub mod bridge;
+pub mod contents;
 pub mod generic;
 pub mod inproc;
 pub mod log;

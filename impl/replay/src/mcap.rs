@@ -6,12 +6,11 @@
 use bytes::Bytes;
 use std::sync::Arc;
 
-use crate::log::{
+use crate::contents::{
     Channel, Contents, Damage, DamageKind, Failure, Fields, Message, Place, ReadOptions, Schema, decompress,
 };
 
-/// The 8 bytes that open and close every MCAP file.
-pub const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+pub use crate::contents::MAGIC;
 
 /// Reads an MCAP file held in memory; damage is kept in [`Contents::failure`].
 pub(crate) fn read(file: &Bytes, options: ReadOptions) -> Contents {

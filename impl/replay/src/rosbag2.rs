@@ -20,7 +20,7 @@ use std::sync::Arc;
 use bytes::Bytes;
 use rusqlite::{Connection, OpenFlags};
 
-use crate::log::{
+use crate::contents::{
     Channel, Container, Contents, Damage, DamageKind, LogError, Message, Place, ReadOptions, Schema, map_file,
 };
 

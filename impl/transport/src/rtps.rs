@@ -21,7 +21,8 @@
 //! Those live 10 s, a reader keeps at most 128, and at the cap a reliable reader evicts the newest: every new
 //! fragmented sample is then discarded until old buffers expire, and delivery stalls for seconds (issue 5; the
 //! SICK log's 10–13 KB deltas at 30 Hz reach the cap after about 8 s). With no same-participant reader, a same-host
-//! writer sends one loopback copy per reader, and fragmented samples reassemble once.
+//! writer sends one loopback copy per reader, and fragmented samples reassemble once (`examples/rtps_burst.rs` shows
+//! both set-ups side by side).
 //!
 //! **Large samples are paced**: after every [`RtpsConfig::pace_bytes`] of large samples the writer waits (bounded)
 //! for acknowledgements, so a burst of 1 MB frames is delivered rather than stalled. Domain id and topic prefix are

@@ -24,7 +24,7 @@ impl AgentCore {
         }
     }
 
-    pub(super) fn collide(&mut self, detail: String, out: &mut Output) {
+    fn collide(&mut self, detail: String, out: &mut Output) {
         out.events.push(Event::Collision { detail: detail.clone() });
         self.collision = Some(detail);
     }

@@ -23,7 +23,7 @@ impl AgentCore {
 
     /// Whether a missing-request is still outstanding: an answer clears it, and one unanswered for half an
     /// announce period no longer counts (a lost request or answer is asked again at the next evidence).
-    pub(super) fn asked_recently(&self, now_ns: u64) -> bool {
+    fn asked_recently(&self, now_ns: u64) -> bool {
         let expiry = if self.config.plant.is(ProtocolMutant::PendingAskNeverExpires) {
             u64::MAX
         } else {
@@ -106,7 +106,7 @@ impl AgentCore {
 
     /// The encoded snapshot, if `deltas` carry more than [`SNAPSHOT_IF_SMALLER_ABOVE_BYTES`] of payload and the
     /// snapshot is smaller than that payload.
-    pub(super) fn smaller_snapshot(&mut self, deltas: &[Arc<Delta>]) -> Option<(Bytes, bool)> {
+    fn smaller_snapshot(&mut self, deltas: &[Arc<Delta>]) -> Option<(Bytes, bool)> {
         let payload: usize = deltas.iter().map(|d| d.payload_bytes()).sum();
         if payload <= SNAPSHOT_IF_SMALLER_ABOVE_BYTES {
             return None;
@@ -128,7 +128,7 @@ impl AgentCore {
     }
 
     /// Splits retained deltas into answer messages of bounded size.
-    pub(super) fn batches(&self, to: AgentId, deltas: &[Arc<Delta>], out: &mut Output) {
+    fn batches(&self, to: AgentId, deltas: &[Arc<Delta>], out: &mut Output) {
         let me = self.config.id;
         let mut batch = Vec::new();
         let mut bytes = 0;

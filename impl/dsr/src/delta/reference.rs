@@ -368,7 +368,7 @@ impl Decoder {
             let dot = self.stored_dot(entry.dot, &place)?;
             let (node_type, name) = entry.value;
             check_type_name(place, "node type", node_type)?;
-            if !crate::replica::valid_node_name(name) {
+            if !crate::ids::valid_node_name(name) {
                 return Err(DeltaError::InvalidNodeName { place: place(), name: name.chars().take(64).collect() });
             }
             if core.values.iter().any(|e: &Entry<NodeCore>| e.dot == dot) {

@@ -11,6 +11,10 @@ use std::sync::Arc;
 use proptest::prelude::*;
 
 use super::*;
+use crate::delta::Delta;
+use crate::ids::Element;
+use crate::store::Register;
+use crate::value::Value;
 
 /// One operation or delivery of a random history. Indices are reduced modulo what exists when it runs.
 #[derive(Clone, Debug)]

@@ -42,7 +42,7 @@ pub(super) struct Reading {
     pub(super) engine: Vec<EngineThread>,
 }
 
-pub(super) fn setup(what: impl Into<String>) -> impl FnOnce(rustdds::dds::CreateError) -> TransportError {
+fn setup(what: impl Into<String>) -> impl FnOnce(rustdds::dds::CreateError) -> TransportError {
     let what = what.into();
     move |e| TransportError::Setup { what, detail: format!("{e:?}") }
 }
@@ -55,38 +55,7 @@ impl Generation {
         multicast: bool,
         state: &Arc<DiscoveryState>,
     ) -> Result<Generation, TransportError> {
-        let networks = if multicast { routable_ipv4_addresses() } else { None };
-        let join = |role: &str| {
-            let mut builder = DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast);
-            if let Some(addresses) = networks.clone() {
-                builder = builder.with_only_networks(addresses);
-            }
-            builder.build().map_err(|e| TransportError::Setup {
-                what: format!("{role} participant in domain {}", config.domain_id),
-                detail: format!("{e:?}"),
-            })
-        };
-        let (publishing, subscribing, engine) = {
-            let _creating = CREATING_PARTICIPANTS.lock().unwrap_or_else(|p| p.into_inner());
-            let before = EngineThread::all();
-            let publishing = join("publishing")?;
-            // Multicast needs the readers apart too: rustdds never routes a writer to its own participant's
-            // readers, and their fallback path would send a second copy.
-            let subscribing =
-                if config.separate_reader_participant || multicast { Some(join("subscribing")?) } else { None };
-            let engine: Vec<EngineThread> = EngineThread::all().into_iter().filter(|t| !before.contains(t)).collect();
-            (publishing, subscribing, engine)
-        };
-        let participants = 1 + usize::from(subscribing.is_some());
-        if engine.len() != 2 * participants {
-            tracing::warn!(
-                "rtps: found {} rustdds threads for {participants} new participant(s), expected {}: a participant \
-                 whose threads end may go unnoticed (no /proc/self/task, or participants created elsewhere in this \
-                 process at the same time)",
-                engine.len(),
-                2 * participants
-            );
-        }
+        let (publishing, subscribing, engine) = join_domain(config, multicast)?;
         let qos = qos(config);
         let publisher = publishing.create_publisher(&qos).map_err(setup("publisher"))?;
         let subscriber =
@@ -163,6 +132,47 @@ impl Generation {
             reading: Reading { readers, watch, local, engine },
         })
     }
+}
+
+/// Creates this generation's participants (the subscribing one only when the readers live apart, see
+/// [`RtpsConfig::separate_reader_participant`]), and finds the threads `rustdds` started for them.
+fn join_domain(
+    config: &RtpsConfig,
+    multicast: bool,
+) -> Result<(DomainParticipant, Option<DomainParticipant>, Vec<EngineThread>), TransportError> {
+    let networks = if multicast { routable_ipv4_addresses() } else { None };
+    let join = |role: &str| {
+        let mut builder = DomainParticipantBuilder::new(config.domain_id).same_host_loopback(!multicast);
+        if let Some(addresses) = networks.clone() {
+            builder = builder.with_only_networks(addresses);
+        }
+        builder.build().map_err(|e| TransportError::Setup {
+            what: format!("{role} participant in domain {}", config.domain_id),
+            detail: format!("{e:?}"),
+        })
+    };
+    let (publishing, subscribing, engine) = {
+        let _creating = CREATING_PARTICIPANTS.lock().unwrap_or_else(|p| p.into_inner());
+        let before = EngineThread::all();
+        let publishing = join("publishing")?;
+        // Multicast needs the readers apart too: rustdds never routes a writer to its own participant's
+        // readers, and their fallback path would send a second copy.
+        let subscribing =
+            if config.separate_reader_participant || multicast { Some(join("subscribing")?) } else { None };
+        let engine: Vec<EngineThread> = EngineThread::all().into_iter().filter(|t| !before.contains(t)).collect();
+        (publishing, subscribing, engine)
+    };
+    let participants = 1 + usize::from(subscribing.is_some());
+    if engine.len() != 2 * participants {
+        tracing::warn!(
+            "rtps: found {} rustdds threads for {participants} new participant(s), expected {}: a participant \
+             whose threads end may go unnoticed (no /proc/self/task, or participants created elsewhere in this \
+             process at the same time)",
+            engine.len(),
+            2 * participants
+        );
+    }
+    Ok((publishing, subscribing, engine))
 }
 
 #[cfg(test)]

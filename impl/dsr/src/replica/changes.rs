@@ -1,0 +1,197 @@
+//! Change events: what a join changed in the visible graph (nodes, edges, names, attribute winners), found by
+//! looking at the elements a delta touches before and after it is joined.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use super::Replica;
+use crate::delta::Delta;
+use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId};
+use crate::mutants::DsrMutant;
+use crate::store::Attrs;
+
+/// A change to the visible graph, reported when change tracking is on ([`Replica::set_change_tracking`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Change {
+    /// A node became visible.
+    NodeInserted {
+        /// The node.
+        id: NodeId,
+    },
+    /// A node stopped being visible (deleted).
+    NodeDeleted {
+        /// The node.
+        id: NodeId,
+    },
+    /// A visible node's shown name changed: it took its plain name back (the node that held the name was deleted)
+    /// or became `name#id` (a concurrent insert of the same name holds it now).
+    NodeRenamed {
+        /// The node.
+        id: NodeId,
+    },
+    /// An edge became visible.
+    EdgeInserted {
+        /// The edge.
+        key: EdgeKey,
+    },
+    /// An edge stopped being visible.
+    EdgeDeleted {
+        /// The edge.
+        key: EdgeKey,
+    },
+    /// An attribute's winning value changed (or the attribute appeared) on a visible element.
+    AttrUpdated {
+        /// The element.
+        element: Element,
+        /// The attribute.
+        name: Name,
+    },
+    /// An attribute disappeared from a visible element.
+    AttrRemoved {
+        /// The element.
+        element: Element,
+        /// The attribute.
+        name: Name,
+    },
+}
+
+/// A change together with the replica whose operation caused it (`None` for a snapshot).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ChangeEvent {
+    /// What changed.
+    pub change: Change,
+    /// Whose operation made it.
+    pub origin: Option<ReplicaId>,
+}
+
+/// The elements a join may change, for change events.
+#[derive(Default)]
+pub(super) struct Touched {
+    pub(super) nodes: BTreeSet<NodeId>,
+    pub(super) edges: BTreeSet<EdgeKey>,
+    pub(super) attrs: BTreeSet<(Element, Name)>,
+}
+
+/// What is visible of the touched elements (before or after a join), for change events.
+pub(super) struct Visibility {
+    /// `None` if invisible, else whether the node shows its plain name (not `name#id`).
+    pub(super) nodes: BTreeMap<NodeId, Option<bool>>,
+    pub(super) edges: BTreeMap<EdgeKey, bool>,
+    pub(super) attrs: BTreeMap<(Element, Name), Option<Dot>>,
+}
+
+impl Replica {
+    /// The elements a delta may change: its own entries, tombstoned nodes and their incident edges, and the
+    /// attributes of all of them.
+    pub(super) fn touched_by(&self, delta: &Delta) -> Touched {
+        let mut touched = Touched::default();
+        touched.nodes.extend(delta.store.nodes.keys().copied());
+        touched.nodes.extend(delta.store.tombstones.iter().copied());
+        touched.edges.extend(delta.store.edges.keys().cloned());
+        if delta.complete {
+            touched.nodes.extend(self.store.nodes.keys().copied());
+            touched.edges.extend(self.store.edges.keys().cloned());
+        }
+        // A node that arrives or goes may take a name from, or give it back to, the visible nodes sharing it.
+        let names: BTreeSet<&Name> = touched
+            .nodes
+            .iter()
+            .flat_map(|id| {
+                let mine = self.store.nodes.get(id).map(|n| n.core.values.iter()).into_iter().flatten();
+                let theirs = delta.store.nodes.get(id).map(|n| n.core.values.iter()).into_iter().flatten();
+                mine.chain(theirs).map(|core| &core.value.name)
+            })
+            .collect();
+        let sharing: Vec<NodeId> =
+            names.into_iter().flat_map(|name| self.names.get(name).into_iter().flatten().map(|(_, id)| *id)).collect();
+        touched.nodes.extend(sharing);
+        let nodes: Vec<NodeId> = touched.nodes.iter().copied().collect();
+        for id in nodes.into_iter().filter(|_| !self.plant.is(DsrMutant::IncidentEdgeEventsMissing)) {
+            touched.edges.extend(self.incident_edges(id));
+        }
+        let mut names = |element: Element, attrs: Option<&Attrs>| {
+            for name in attrs.into_iter().flat_map(|a| a.keys()) {
+                touched.attrs.insert((element.clone(), name.clone()));
+            }
+        };
+        for id in touched.nodes.clone() {
+            names(Element::Node(id), self.store.nodes.get(&id).map(|n| &n.attrs));
+            names(Element::Node(id), delta.store.nodes.get(&id).map(|n| &n.attrs));
+        }
+        for key in touched.edges.clone() {
+            names(Element::Edge(key.clone()), self.store.edges.get(&key).map(|e| &e.attrs));
+            names(Element::Edge(key.clone()), delta.store.edges.get(&key).map(|e| &e.attrs));
+        }
+        touched
+    }
+
+    pub(super) fn look(&self, touched: &Touched) -> Visibility {
+        let plant = self.plant;
+        Visibility {
+            nodes: touched.nodes.iter().map(|id| (*id, self.node(*id).map(|node| node.holds_name()))).collect(),
+            edges: touched.edges.iter().map(|key| (key.clone(), self.edge_visible(key))).collect(),
+            attrs: touched
+                .attrs
+                .iter()
+                .map(|(element, name)| {
+                    let visible = match element {
+                        Element::Node(id) => self.node_visible(*id),
+                        Element::Edge(key) => self.edge_visible(key),
+                    };
+                    let attrs = match element {
+                        Element::Node(id) => self.store.nodes.get(id).map(|n| &n.attrs),
+                        Element::Edge(key) => self.store.edges.get(key).map(|e| &e.attrs),
+                    };
+                    let winner = attrs
+                        .filter(|_| visible)
+                        .and_then(|a| a.get(name))
+                        .and_then(|r| r.winner_planted(plant))
+                        .map(|e| e.dot);
+                    ((element.clone(), name.clone()), winner)
+                })
+                .collect(),
+        }
+    }
+
+    pub(super) fn record_changes(&mut self, before: &Visibility, after: &Visibility, origin: Option<ReplicaId>) {
+        let mut events = Vec::new();
+        let mut push = |change| events.push(ChangeEvent { change, origin });
+        for (id, was) in &before.nodes {
+            match (was, after.nodes[id]) {
+                (None, Some(_)) => push(Change::NodeInserted { id: *id }),
+                (Some(_), None) => push(Change::NodeDeleted { id: *id }),
+                (Some(plain), Some(now)) if *plain != now => push(Change::NodeRenamed { id: *id }),
+                _ => {}
+            }
+        }
+        for (key, was) in &before.edges {
+            match (was, after.edges[key]) {
+                (false, true) => push(Change::EdgeInserted { key: key.clone() }),
+                (true, false) => push(Change::EdgeDeleted { key: key.clone() }),
+                _ => {}
+            }
+        }
+        for ((element, name), was) in &before.attrs {
+            let now = after.attrs[&(element.clone(), name.clone())];
+            let change = match (was, now) {
+                (_, Some(dot)) if *was != Some(dot) => {
+                    Change::AttrUpdated { element: element.clone(), name: name.clone() }
+                }
+                (Some(_), None) => {
+                    let still_visible = match element {
+                        Element::Node(id) => after.nodes.get(id).is_some_and(Option::is_some),
+                        Element::Edge(key) => after.edges.get(key).copied().unwrap_or(false),
+                    };
+                    if !still_visible {
+                        continue; // the element's deletion says it all
+                    }
+                    Change::AttrRemoved { element: element.clone(), name: name.clone() }
+                }
+                _ => continue,
+            };
+            push(change);
+        }
+        if let Some(queue) = self.changes.as_mut() {
+            queue.extend(events);
+        }
+    }
+}
