@@ -9,8 +9,8 @@ What counts as an import: every `crate::…`, `super::…` and `self::…` path 
 inline), resolved to the module that defines the item, through `pub use` re-exports. A use of a module's own
 descendants or ancestors is structure, not layering (a parent declares and re-exports its children, a child uses its
 parent's shared types), so an edge from module M to module T is lifted to the two children of their lowest common
-ancestor that contain M and T, and a cycle is a strongly connected set of sibling modules. Test code counts too: a
-`#[cfg(test)] mod tests` inside a file is part of that file's module.
+ancestor that contain M and T, and a cycle is a strongly connected set of sibling modules. Test code sits above
+everything it tests, so `#[cfg(test)]` modules (inline blocks and files) are left out.
 
 The check reads source text (comments and string literals stripped); it does not expand macros.
 """
@@ -29,6 +29,33 @@ def strip_comments_and_strings(text):
     text = re.sub(r'"(?:\\.|[^"\\])*"', '""', text, flags=re.S)
     text = re.sub(r"//[^\n]*", "", text)
     return text
+
+
+TEST_MOD_RE = re.compile(r"#\[cfg\(test\)\]\s*(?:#\[[^\]]*\]\s*)*(?:pub(?:\([^)]*\))?\s+)?mod\s+(\w+)\s*([;{])")
+
+
+def strip_test_modules(text):
+    """Removes inline `#[cfg(test)] mod x { ... }` blocks; returns the text and the names of `#[cfg(test)] mod x;`."""
+    out, files, pos = [], set(), 0
+    for match in TEST_MOD_RE.finditer(text):
+        if match.start() < pos:
+            continue
+        if match.group(2) == ";":
+            files.add(match.group(1))
+            continue
+        depth, i = 0, match.end() - 1
+        while i < len(text):
+            if text[i] == "{":
+                depth += 1
+            elif text[i] == "}":
+                depth -= 1
+                if depth == 0:
+                    break
+            i += 1
+        out.append(text[pos : match.start()])
+        pos = i + 1
+    out.append(text[pos:])
+    return "".join(out), files
 
 
 def module_files(src):
@@ -99,7 +126,14 @@ def absolute(module, path):
 
 def analyse(src):
     modules = module_files(src)
-    texts = {m: strip_comments_and_strings(p.read_text(encoding="utf-8")) for m, p in modules.items()}
+    texts, test_children = {}, set()
+    for module, path in modules.items():
+        text, files = strip_test_modules(strip_comments_and_strings(path.read_text(encoding="utf-8")))
+        texts[module] = text
+        test_children.update(module + (name,) for name in files)
+    tests = {m for m in modules if any(m[: len(t)] == t for t in test_children)}
+    modules = {m: p for m, p in modules.items() if m not in tests}
+    texts = {m: t for m, t in texts.items() if m not in tests}
     reexports = {}  # (module, name) -> absolute path segments
     refs = {m: [] for m in modules}
     for module, text in texts.items():
