@@ -195,4 +195,3 @@ mod tests {
         assert!(error.to_string().contains("busy_ms"), "{error}");
     }
 }
-

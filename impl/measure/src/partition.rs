@@ -14,8 +14,7 @@ use std::time::{Duration, Instant};
 use agent::{Agent, AgentConfig, AgentId};
 use anyhow::Context as _;
 use dsr::{NewNode, attrs};
-use serde::Serialize;
-use transport::fault::{FaultConfig, FaultInjector, FaultPlan};
+use transport::fault::{FaultInjector, FaultPlan};
 use transport::inproc::Bus;
 use transport::rtps::{RtpsConfig, RtpsTransport};
 use transport::{Clock, SystemClock, Transport};
@@ -39,7 +38,7 @@ pub fn run(config: &PartitionConfig) -> anyhow::Result<PartitionResult> {
             run_on(config, || Ok(bus.attach(1 << 16)))
         }
         Link::Rtps { domain_id } => {
-            let topic_prefix = format!("partition{}_{}", std::process::id(), crate::run::clock_id());
+            let topic_prefix = format!("partition{}_{}", std::process::id(), crate::clock::run_number());
             run_on(config, || {
                 let rtps = RtpsConfig { domain_id, topic_prefix: topic_prefix.clone(), ..RtpsConfig::default() };
                 RtpsTransport::new(rtps).context("cannot create an RTPS participant")
@@ -150,4 +149,3 @@ mod tests {
         assert!(result.reconverge_ns.is_some(), "{result:?}");
     }
 }
-

@@ -236,7 +236,7 @@ pub(crate) fn run(workload: &Workload, config: &RunConfig, domain_id: u16) -> an
         .as_deref()
         .context("a run with receiver processes needs the receiver program (RunConfig::receiver_program)")?;
     let clock = MonoClock::start();
-    let topic_prefix = format!("measurep{}_{}_{}", std::process::id(), config.agents, source::clock_id());
+    let topic_prefix = format!("measurep{}_{}_{}", std::process::id(), config.agents, crate::clock::run_number());
     let source = RtpsTransport::new(RtpsConfig {
         domain_id,
         topic_prefix: topic_prefix.clone(),

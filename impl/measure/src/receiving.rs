@@ -91,4 +91,3 @@ impl Receiving {
         self.applied == self.applied_at.len() as u64
     }
 }
-

@@ -29,7 +29,7 @@ use transport::{Channel, Clock, Transport};
 
 use crate::clock::MonoClock;
 use crate::receiving::{PROBE, Received, ReceiverOutcome, Receiving};
-use crate::source::{SourceSide, clock_id, publish_all, samples, summarise};
+use crate::source::{SourceSide, publish_all, samples, summarise};
 use crate::usage::{loopback_tx_bytes, thread_cpu_ns};
 use crate::workload::Workload;
 
@@ -84,7 +84,7 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
     let clock = MonoClock::start();
     let bus = Bus::new();
     let plan = config.faults.map(|faults| FaultPlan::new(config.seed, faults));
-    let topic_prefix = format!("measure{}_{}_{}", std::process::id(), config.agents, clock_id());
+    let topic_prefix = format!("measure{}_{}_{}", std::process::id(), config.agents, crate::clock::run_number());
     let endpoint = |bus: &Bus| -> anyhow::Result<Box<dyn Transport>> {
         fn wrap<T: Transport + 'static>(plan: &Option<FaultPlan>, inner: T, clock: MonoClock) -> Box<dyn Transport> {
             match plan {
@@ -172,6 +172,8 @@ pub fn run(workload: &Workload, config: &RunConfig) -> anyhow::Result<RunResult>
 
 #[cfg(test)]
 mod tests {
+    use transport::fault::FaultConfig;
+
     use super::*;
     use crate::workload::synthetic;
 
@@ -236,4 +238,3 @@ mod tests {
         assert_eq!(result.convergence.count + result.writes_not_everywhere, result.writes);
     }
 }
-

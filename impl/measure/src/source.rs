@@ -2,8 +2,6 @@
 //! ([`crate::process`]): the samples of a workload, their publication at their due times, and the summary of a run
 //! from the source's stamps and the receivers' outcomes.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-
 use bytes::{BufMut as _, Bytes, BytesMut};
 use transport::{Channel, Transport};
 
@@ -14,12 +12,6 @@ use crate::results::{AgentCost, Bandwidth, RunResult, TimelineWrite, WriteTimeli
 use crate::spec::RunConfig;
 use crate::usage::{peak_rss_bytes, thread_cpu_ns};
 use crate::workload::Workload;
-
-/// A number distinguishing runs of this process (topic names of RTPS runs).
-pub(crate) fn clock_id() -> u64 {
-    static NEXT: AtomicU64 = AtomicU64::new(0);
-    NEXT.fetch_add(1, Ordering::Relaxed)
-}
 
 /// Samples of a workload: the write's index (8 bytes, little-endian) before its encoded delta. Built before the
 /// clock matters, so publishing is all the source does while measured.
@@ -162,4 +154,3 @@ pub(crate) fn summarise(
         timeline,
     }
 }
-

@@ -207,7 +207,6 @@ impl ExperimentSet {
     }
 }
 
-
 /// Longest scheduler timeline accepted, ms (the records of every step are kept).
 pub const MAX_TIMELINE_DURATION_MS: u64 = 60_000;
 
@@ -318,7 +317,6 @@ impl Default for RunConfig {
         }
     }
 }
-
 
 /// How a partition experiment runs.
 #[derive(Clone, Debug)]

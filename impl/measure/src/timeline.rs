@@ -22,7 +22,7 @@
 //! finished. The derivation is pure, and [`run_with_clock`] takes any [`Clock`], so the tests run the same code on
 //! bica's virtual clock and check exact values; only [`run`] uses the real clock, and its numbers are measurements.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::Context as _;
 use bica::core::{ComponentId, SchedulerConfig};
@@ -324,7 +324,9 @@ pub fn run_with_clock<C: Clock + Clone + 'static>(
         experiment.overload_busy_ms * NS_PER_MS,
         spend,
     );
-    runtime.register(overload, experiment.overload_period_ms * NS_PER_MS).map_err(bica_error("registering the overload"))?;
+    runtime
+        .register(overload, experiment.overload_period_ms * NS_PER_MS)
+        .map_err(bica_error("registering the overload"))?;
     runtime.activate::<Overload>().map_err(bica_error("activating the overload"))?;
     let detector = runtime.registry().handle::<BlobDetector>().map_err(bica_error("the detector"))?.id();
 
@@ -368,6 +370,8 @@ pub fn run(experiment: &TimelineExperiment, root: &Path) -> anyhow::Result<Timel
 
 #[cfg(test)]
 mod tests {
+    use std::path::PathBuf;
+
     use super::*;
     use bica::trace::MissEvent;
 
@@ -525,4 +529,3 @@ mod tests {
         assert_eq!((frames[0].1.width, frames[0].1.height, frames[0].1.encoding), (752, 480, Encoding::Mono8));
     }
 }
-

@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use measure::Provenance;
 use measure::latency::{self, PayloadClass, Percentiles};
 use measure::provenance::{DatasetChecksum, Machine};
 use measure::results::{
@@ -13,7 +14,6 @@ use measure::results::{
     Timeline, TimelineResult,
 };
 use measure::spec::{ExperimentSet, TimelineExperiment};
-use measure::Provenance;
 
 const SET: &str = r#"
 agents = [2, 4]
@@ -257,7 +257,11 @@ fn report_text_matches_the_frozen_copy() {
             std::fs::write(golden(file), &written).unwrap();
         }
         let frozen = std::fs::read_to_string(golden(file)).unwrap();
-        assert!(written == frozen, "{file} differs from tests/golden/{file}; diff {} against it", out.join(file).display());
+        assert!(
+            written == frozen,
+            "{file} differs from tests/golden/{file}; diff {} against it",
+            out.join(file).display()
+        );
     }
     let _ = std::fs::remove_dir_all(&out);
 }

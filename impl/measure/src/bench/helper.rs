@@ -77,10 +77,7 @@ mod tests {
     #[test]
     fn helper_command_lines_name_every_setting() {
         let echo = echo_args(3, "p", true, Multicast::Off, UpdateDelivery::Reliable);
-        assert_eq!(
-            echo.join(" "),
-            "bench echo --domain 3 --prefix p --raw --multicast off --updates reliable"
-        );
+        assert_eq!(echo.join(" "), "bench echo --domain 3 --prefix p --raw --multicast off --updates reliable");
         assert_eq!(join_child_args(1, "j", 10).join(" "), "bench join-child --domain 1 --prefix j --nodes 10");
         assert_eq!(
             fanout_reader_args(2, "f", Multicast::On).join(" "),

@@ -34,19 +34,13 @@
 //! latencies as the in-process receivers apply them), and `cortex report` through [`write_runs`] (one file per run,
 //! from each [`RunResult`]'s bounded [`WriteTimeline`]).
 
-use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::mpsc::{Receiver, channel};
+use std::path::Path;
 
 use anyhow::Context as _;
-use dsr::Delta;
-use hdrhistogram::Histogram;
 use mcap::records::{MessageHeader, Metadata};
-use replay::inproc::{Delivery, InProcNetwork, Sink, SinkError};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value as Json, json};
 
@@ -551,4 +545,3 @@ pub fn provenance_metadata(provenance: &Provenance) -> BTreeMap<String, String> 
         ("clock".to_owned(), "log and publish times are ns on the run's monotonic clock".to_owned()),
     ])
 }
-

@@ -104,7 +104,7 @@ pub struct RecordedRun {
     pub counts: RecordCounts,
 }
 
-fn slug(text: &str) -> String {
+pub(super) fn slug(text: &str) -> String {
     let mut out = String::new();
     for c in text.replace(".mcap", "").chars() {
         if c.is_ascii_alphanumeric() || c == '.' {
@@ -148,4 +148,3 @@ pub fn write_runs(results: &Results, out: &Path) -> anyhow::Result<Vec<RecordedR
     }
     Ok(recorded)
 }
-

@@ -2,17 +2,19 @@
 //! and every application as a latency, while the replay runs.
 
 use std::cell::Cell;
+use std::collections::BTreeMap;
 use std::io::{Seek, Write};
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, channel};
 
+use anyhow::Context as _;
 use dsr::Delta;
 use hdrhistogram::Histogram;
 use replay::inproc::{Delivery, InProcNetwork, Sink, SinkError};
 
 use super::{ConvergenceWindow, RunRecorder, WriteLatency};
 use crate::clock::MonoClock;
-use crate::latency::{self, LatencyRecorder, PayloadClass, Percentiles};
+use crate::latency::{self, LatencyRecorder, PayloadClass};
 
 struct InFlight {
     publish_ns: u64,
@@ -166,4 +168,3 @@ impl<W: Write + Seek> Sink for RecordingSink<'_, W> {
         flushed
     }
 }
-

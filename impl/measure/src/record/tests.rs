@@ -1,14 +1,18 @@
 //! Tests of the recordings: files that the `mcap` crate's reader accepts, messages that validate against their
 //! channels' schemas, runs recorded from their results and from a live replay.
 
+use std::cell::Cell;
 use std::io::Cursor;
 
 use bytes::Bytes;
-use dsr::{Replica, ReplicaId};
+use dsr::{Delta, Replica, ReplicaId};
+use replay::inproc::InProcNetwork;
 use replay::log::{Log, ReadOptions};
 use replay::{Bridge, BridgeOptions, Pacer, Rate};
 
+use super::runs::slug;
 use super::*;
+use crate::clock::MonoClock;
 use crate::run::{self, RunConfig};
 use crate::workload;
 

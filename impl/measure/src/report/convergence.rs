@@ -116,8 +116,7 @@ fn partition_table(md: &mut String, r: &Results) {
             x.announce_period_ms,
             x.writes,
             x.dropped,
-            x.reconverge_ns
-                .map_or_else(|| "not within the timeout".to_owned(), |ns| format!("{:.1}", ms_from_ns(ns)))
+            x.reconverge_ns.map_or_else(|| "not within the timeout".to_owned(), |ns| format!("{:.1}", ms_from_ns(ns)))
         );
     }
     for transport in &r.set.partition.transports {

@@ -150,4 +150,3 @@ mod tests {
         assert!(md.contains("Not run"));
     }
 }
-

@@ -80,7 +80,12 @@ fn draw(results: &Results, dir: &Path) -> anyhow::Result<()> {
         },
         markers: vec![Series {
             name: format!("miss (lateness > {} µs)", e.miss_tolerance_us),
-            points: t.steps.iter().filter(|s| s.miss).map(|s| (s_from_ns(s.start_ns), ms_from_ns(s.lateness_ns))).collect(),
+            points: t
+                .steps
+                .iter()
+                .filter(|s| s.miss)
+                .map(|s| (s_from_ns(s.start_ns), ms_from_ns(s.lateness_ns)))
+                .collect(),
         }],
         x_range,
         shaded: shaded.clone(),

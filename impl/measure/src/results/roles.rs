@@ -70,3 +70,5 @@ pub struct RolesResult {
     pub digests_equal: bool,
     /// Every agent, the bridge first.
     #[serde(rename(deserialize = "agent_reports"))]
+    pub agents: Vec<AgentRow>,
+}

@@ -1,4 +1,4 @@
-//! What one run of [`crate::run`] measured, and how its endpoints were connected.
+//! What one run of [`crate::run`] measured: latencies, convergence, bytes, costs, and the per-write timeline.
 
 use hdrhistogram::Histogram;
 use serde::Serialize;
@@ -103,7 +103,6 @@ pub struct RunResult {
     #[serde(skip)]
     pub timeline: WriteTimeline,
 }
-
 
 /// in a [`RunResult`] so the run can be recorded after it ends.
 #[derive(Clone, Debug, Default)]

@@ -109,6 +109,3 @@ impl TimelineResult {
             && self.counters.skipped_releases == t.skipped_releases
     }
 }
-
-/// Reads the images of the first `sensor_msgs/Image` topic of a log, each with its log time after the first one.
-///
