@@ -12,7 +12,7 @@ use anyhow::Context as _;
 use replay::Rate;
 
 use crate::provenance::{DatasetChecksum, Provenance};
-use crate::results::{FaultRun, Results};
+use crate::results::{FaultRun, PartitionResult, Results, RunResult};
 use crate::spec::{Link, LogSpec, PartitionConfig, RunConfig};
 use crate::workload::{self, Workload};
 use crate::{partition, roles, run, timeline};
@@ -51,85 +51,17 @@ pub fn run_set(
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<Results> {
     let started = Instant::now();
-    let mut provenance = Provenance::current();
-    let mut seen = BTreeMap::new();
-    for spec in set.logs.iter().chain([&set.faults.log]) {
-        if seen.insert(spec.path.clone(), ()).is_none() {
-            let checksum = DatasetChecksum::of(&root.join(&spec.path))
-                .with_context(|| format!("cannot read {}", spec.path.display()))?;
-            provenance.datasets.push(checksum);
-        }
+    // Every transport name is checked before the first run, so a typo does not cost a sweep.
+    let names = set.transports.iter().chain(&set.faults.transports).chain(&set.partition.transports);
+    for name in names.chain([&set.payload.transport]) {
+        link(name, set.rtps_domain)?;
     }
-    for path in set.timeline.as_ref().map(|t| &t.log).into_iter().chain(set.roles.as_ref().map(|r| &r.log.path)) {
-        if seen.insert(path.clone(), ()).is_none() {
-            let checksum =
-                DatasetChecksum::of(&root.join(path)).with_context(|| format!("cannot read {}", path.display()))?;
-            provenance.datasets.push(checksum);
-        }
-    }
-    for (i, seed) in set.seeds.iter().enumerate() {
-        provenance.seeds.insert(format!("replay[{i}]"), *seed);
-    }
-    provenance.seeds.insert("payload".into(), 1);
-    provenance.seeds.insert("faults".into(), 1);
-    provenance.seeds.insert("partition_first_of_1_to_repetitions".into(), 1);
-
-    let links = set.transports.iter().map(|t| link(t, set.rtps_domain)).collect::<anyhow::Result<Vec<_>>>()?;
-    let fault_links =
-        set.faults.transports.iter().map(|t| link(t, set.rtps_domain)).collect::<anyhow::Result<Vec<_>>>()?;
-    let payload_link = link(&set.payload.transport, set.rtps_domain)?;
+    let provenance = provenance_of(set, root)?;
     let base = RunConfig { receiver_program: receiver_program.map(Path::to_path_buf), ..RunConfig::default() };
-    let mut replay = Vec::new();
-    for spec in &set.logs {
-        let workload = plan(root, spec)?;
-        for &link in &links {
-            for &agents in &set.agents {
-                for &seed in &set.seeds {
-                    let result = run::run(&workload, &RunConfig { agents, seed, link, ..base.clone() })
-                        .with_context(|| format!("{} with {agents} agents over {}", workload.name, link.name()))?;
-                    progress(&format!("{} {} N={agents} seed {seed}", workload.name, link.name()));
-                    replay.push(result);
-                }
-            }
-        }
-    }
-    let mut payload = Vec::new();
-    for &size in &set.payload.sizes {
-        let workload = workload::synthetic(size, set.payload.rate_hz, set.payload.count, 1)?;
-        let config = RunConfig { agents: set.payload.agents, seed: 1, link: payload_link, ..base.clone() };
-        payload.push(run::run(&workload, &config).with_context(|| format!("payload {size} B"))?);
-        progress(&format!("payload {size} B"));
-    }
-    let mut faults = Vec::new();
-    let workload = plan(root, &set.faults.log)?;
-    for &link in &fault_links {
-        for variant in &set.faults.variants {
-            let injected = variant.config();
-            let config = RunConfig { agents: set.faults.agents, seed: 1, link, faults: injected, ..base.clone() };
-            let run = run::run(&workload, &config)
-                .with_context(|| format!("faults {} over {}", variant.label, link.name()))?;
-            faults.push(FaultRun { label: variant.label.clone(), run });
-            progress(&format!("faults {} ({})", variant.label, link.name()));
-        }
-    }
-    let mut partitions = Vec::new();
-    for name in &set.partition.transports {
-        let link = link(name, set.rtps_domain)?;
-        for seed in 1..=u64::from(set.partition.repetitions) {
-            let config = PartitionConfig {
-                agents: set.partition.agents,
-                partition: Duration::from_millis(set.partition.partition_ms),
-                rate_hz: set.partition.rate_hz,
-                announce_period: Duration::from_millis(set.partition.announce_ms),
-                seed,
-                link,
-                ..PartitionConfig::default()
-            };
-            partitions
-                .push(partition::run(&config).with_context(|| format!("partition over {} seed {seed}", link.name()))?);
-            progress(&format!("partition {} seed {seed}", link.name()));
-        }
-    }
+    let replay = replay_sweep(set, root, &base, progress)?;
+    let payload = payload_sweep(set, &base, progress)?;
+    let faults = fault_variants(set, root, &base, progress)?;
+    let partition = partitions(set, progress)?;
     let timeline = match &set.timeline {
         Some(experiment) => {
             let result = timeline::run(experiment, root).context("scheduler timeline")?;
@@ -155,11 +87,122 @@ pub fn run_set(
         replay,
         payload,
         faults,
-        partition: partitions,
+        partition,
         timeline,
         roles,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+/// The provenance of a run of `set` started now: the checksum of every dataset it reads (each once) and its seeds.
+fn provenance_of(set: &ExperimentSet, root: &Path) -> anyhow::Result<Provenance> {
+    let mut provenance = Provenance::current();
+    let mut seen = BTreeMap::new();
+    let logs = set.logs.iter().chain([&set.faults.log]).map(|spec| &spec.path);
+    let optional = set.timeline.as_ref().map(|t| &t.log).into_iter().chain(set.roles.as_ref().map(|r| &r.log.path));
+    for path in logs.chain(optional) {
+        if seen.insert(path.clone(), ()).is_none() {
+            let checksum =
+                DatasetChecksum::of(&root.join(path)).with_context(|| format!("cannot read {}", path.display()))?;
+            provenance.datasets.push(checksum);
+        }
+    }
+    for (i, seed) in set.seeds.iter().enumerate() {
+        provenance.seeds.insert(format!("replay[{i}]"), *seed);
+    }
+    provenance.seeds.insert("payload".into(), 1);
+    provenance.seeds.insert("faults".into(), 1);
+    provenance.seeds.insert("partition_first_of_1_to_repetitions".into(), 1);
+    Ok(provenance)
+}
+
+/// One run per log, transport, number of agents and seed.
+fn replay_sweep(
+    set: &ExperimentSet,
+    root: &Path,
+    base: &RunConfig,
+    progress: &mut dyn FnMut(&str),
+) -> anyhow::Result<Vec<RunResult>> {
+    let links = set.transports.iter().map(|t| link(t, set.rtps_domain)).collect::<anyhow::Result<Vec<_>>>()?;
+    let mut replay = Vec::new();
+    for spec in &set.logs {
+        let workload = plan(root, spec)?;
+        for &link in &links {
+            for &agents in &set.agents {
+                for &seed in &set.seeds {
+                    let result = run::run(&workload, &RunConfig { agents, seed, link, ..base.clone() })
+                        .with_context(|| format!("{} with {agents} agents over {}", workload.name, link.name()))?;
+                    progress(&format!("{} {} N={agents} seed {seed}", workload.name, link.name()));
+                    replay.push(result);
+                }
+            }
+        }
+    }
+    Ok(replay)
+}
+
+/// One run of synthetic writes per payload size.
+fn payload_sweep(
+    set: &ExperimentSet,
+    base: &RunConfig,
+    progress: &mut dyn FnMut(&str),
+) -> anyhow::Result<Vec<RunResult>> {
+    let payload_link = link(&set.payload.transport, set.rtps_domain)?;
+    let mut payload = Vec::new();
+    for &size in &set.payload.sizes {
+        let workload = workload::synthetic(size, set.payload.rate_hz, set.payload.count, 1)?;
+        let config = RunConfig { agents: set.payload.agents, seed: 1, link: payload_link, ..base.clone() };
+        payload.push(run::run(&workload, &config).with_context(|| format!("payload {size} B"))?);
+        progress(&format!("payload {size} B"));
+    }
+    Ok(payload)
+}
+
+/// One run of the fault experiment's log per transport and variant.
+fn fault_variants(
+    set: &ExperimentSet,
+    root: &Path,
+    base: &RunConfig,
+    progress: &mut dyn FnMut(&str),
+) -> anyhow::Result<Vec<FaultRun>> {
+    let fault_links =
+        set.faults.transports.iter().map(|t| link(t, set.rtps_domain)).collect::<anyhow::Result<Vec<_>>>()?;
+    let mut faults = Vec::new();
+    let workload = plan(root, &set.faults.log)?;
+    for &link in &fault_links {
+        for variant in &set.faults.variants {
+            let injected = variant.config();
+            let config = RunConfig { agents: set.faults.agents, seed: 1, link, faults: injected, ..base.clone() };
+            let run = run::run(&workload, &config)
+                .with_context(|| format!("faults {} over {}", variant.label, link.name()))?;
+            faults.push(FaultRun { label: variant.label.clone(), run });
+            progress(&format!("faults {} ({})", variant.label, link.name()));
+        }
+    }
+    Ok(faults)
+}
+
+/// The partition runs: seeds 1 to `repetitions` per transport.
+fn partitions(set: &ExperimentSet, progress: &mut dyn FnMut(&str)) -> anyhow::Result<Vec<PartitionResult>> {
+    let mut partitions = Vec::new();
+    for name in &set.partition.transports {
+        let link = link(name, set.rtps_domain)?;
+        for seed in 1..=u64::from(set.partition.repetitions) {
+            let config = PartitionConfig {
+                agents: set.partition.agents,
+                partition: Duration::from_millis(set.partition.partition_ms),
+                rate_hz: set.partition.rate_hz,
+                announce_period: Duration::from_millis(set.partition.announce_ms),
+                seed,
+                link,
+                ..PartitionConfig::default()
+            };
+            partitions
+                .push(partition::run(&config).with_context(|| format!("partition over {} seed {seed}", link.name()))?);
+            progress(&format!("partition {} seed {seed}", link.name()));
+        }
+    }
+    Ok(partitions)
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@ use std::path::Path;
 use super::format::footer;
 use super::{Context, Section};
 use crate::figures::{self, Chart, Panel, Series};
-use crate::results::Results;
+use crate::results::{Results, StepRecord, TimelineResult};
 use crate::units::{ms_from_ns, s_from_ms, s_from_ns};
 
 const FIGURE: &str = "scheduler_timeline";
@@ -26,22 +26,28 @@ const HOW: &str = "none: one BICA runtime on one thread, real monotonic clock, o
 
 /// Draws the figure: achieved frequency, lateness per step with the misses marked, and misses and skipped releases
 /// over time, the overload window shaded in each panel.
-///
-/// # Errors
-/// A file that cannot be written or a drawing error.
 fn draw(results: &Results, dir: &Path) -> anyhow::Result<()> {
     let Some(result) = &results.timeline else { return Ok(()) };
-    let footer = footer(&results.provenance, HOW);
     let e = &result.experiment;
-    let t = &result.timeline;
-    let x_range = Some((0.0, s_from_ms(e.duration_ms)));
-    let shaded = Some((
-        s_from_ms(e.overload_from_ms),
-        s_from_ms(e.overload_until_ms),
-        format!("overload: {} ms busy every {} ms", e.overload_busy_ms, e.overload_period_ms),
-    ));
+    let frame = Panel {
+        x_range: Some((0.0, s_from_ms(e.duration_ms))),
+        shaded: Some((
+            s_from_ms(e.overload_from_ms),
+            s_from_ms(e.overload_until_ms),
+            format!("overload: {} ms busy every {} ms", e.overload_busy_ms, e.overload_period_ms),
+        )),
+        ..Panel::default()
+    };
+    let panels =
+        [frequency_panel(result, frame.clone()), lateness_panel(result, frame.clone()), counts_panel(result, frame)];
+    figures::render_panels(&panels, &footer(&results.provenance, HOW), dir, FIGURE)
+}
+
+/// Achieved frequency over the sliding window, beside the nominal one.
+fn frequency_panel(result: &TimelineResult, frame: Panel) -> Panel {
+    let e = &result.experiment;
     let nominal_hz = 1e3 / e.period_ms as f64;
-    let frequency = Panel {
+    Panel {
         chart: Chart {
             title: format!(
                 "{} at {nominal_hz:.0} Hz on the real clock: achieved frequency ({} ms window)",
@@ -53,7 +59,7 @@ fn draw(results: &Results, dir: &Path) -> anyhow::Result<()> {
             series: vec![
                 Series {
                     name: "achieved".into(),
-                    points: t.frequency.iter().map(|&(t, hz)| (s_from_ns(t), hz)).collect(),
+                    points: result.timeline.frequency.iter().map(|&(t, hz)| (s_from_ns(t), hz)).collect(),
                 },
                 Series {
                     name: "nominal".into(),
@@ -62,39 +68,38 @@ fn draw(results: &Results, dir: &Path) -> anyhow::Result<()> {
             ],
             ..Chart::default()
         },
-        x_range,
-        shaded: shaded.clone(),
-        ..Panel::default()
-    };
-    let lateness = Panel {
+        ..frame
+    }
+}
+
+/// Lateness of every step, the misses marked.
+fn lateness_panel(result: &TimelineResult, frame: Panel) -> Panel {
+    let steps = &result.timeline.steps;
+    let point = |s: &StepRecord| (s_from_ns(s.start_ns), ms_from_ns(s.lateness_ns));
+    Panel {
         chart: Chart {
             title: "Lateness of each step (start minus release)".into(),
             x_label: "time of the step's start (s)".into(),
             y_label: "ms".into(),
-            series: vec![Series {
-                name: "lateness".into(),
-                points: t.steps.iter().map(|s| (s_from_ns(s.start_ns), ms_from_ns(s.lateness_ns))).collect(),
-            }],
+            series: vec![Series { name: "lateness".into(), points: steps.iter().map(point).collect() }],
             legend_upper_left: true,
             ..Chart::default()
         },
         markers: vec![Series {
-            name: format!("miss (lateness > {} µs)", e.miss_tolerance_us),
-            points: t
-                .steps
-                .iter()
-                .filter(|s| s.miss)
-                .map(|s| (s_from_ns(s.start_ns), ms_from_ns(s.lateness_ns)))
-                .collect(),
+            name: format!("miss (lateness > {} µs)", result.experiment.miss_tolerance_us),
+            points: steps.iter().filter(|s| s.miss).map(point).collect(),
         }],
-        x_range,
-        shaded: shaded.clone(),
-    };
+        ..frame
+    }
+}
+
+/// Misses and skipped releases so far, drawn as staircases: a count changes at a step's start and holds until the
+/// next change.
+fn counts_panel(result: &TimelineResult, frame: Panel) -> Panel {
     let mut misses = vec![(0.0, 0.0)];
     let mut skipped = vec![(0.0, 0.0)];
     let (mut m, mut k) = (0.0, 0.0);
-    // Drawn as staircases: a count changes at a step's start and holds until the next change.
-    for s in &t.steps {
+    for s in &result.timeline.steps {
         let at = s_from_ns(s.start_ns);
         if s.miss {
             misses.push((at, m));
@@ -107,10 +112,10 @@ fn draw(results: &Results, dir: &Path) -> anyhow::Result<()> {
             skipped.push((at, k));
         }
     }
-    let end = s_from_ms(e.duration_ms);
+    let end = s_from_ms(result.experiment.duration_ms);
     misses.push((end, m));
     skipped.push((end, k));
-    let cumulative = Panel {
+    Panel {
         chart: Chart {
             title: "Misses and skipped releases so far".into(),
             x_label: "time (s)".into(),
@@ -122,11 +127,8 @@ fn draw(results: &Results, dir: &Path) -> anyhow::Result<()> {
             legend_upper_left: true,
             ..Chart::default()
         },
-        x_range,
-        shaded,
-        ..Panel::default()
-    };
-    figures::render_panels(&[frequency, lateness, cumulative], &footer, dir, FIGURE)
+        ..frame
+    }
 }
 
 fn short_type(name: &str) -> &str {
