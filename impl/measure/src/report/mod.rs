@@ -124,3 +124,22 @@ fn introduction(md: &mut String, r: &Results) {
          process, on the in-process bus or RTPS as their table says. Medians and percentiles of all runs, never a best run.\n"
     );
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeSet;
+
+    use super::*;
+
+    #[test]
+    fn every_section_has_its_own_heading_and_figure_stems() {
+        let headings: BTreeSet<&str> = headings().collect();
+        assert_eq!(headings.len(), SECTIONS.len(), "two sections share a heading");
+        assert!(headings.iter().all(|h| h.starts_with("## ")), "{headings:?}");
+        let stems: Vec<&str> = figure_stems().collect();
+        assert_eq!(stems.iter().collect::<BTreeSet<_>>().len(), stems.len(), "two figures share a stem");
+        for section in SECTIONS {
+            assert_eq!(section.draw.is_some(), !section.figures.is_empty(), "{} draws what it lists", section.heading);
+        }
+    }
+}

@@ -70,8 +70,6 @@ pub struct Timeline {
     pub overlaps: u64,
 }
 
-/// Turns trace events (oldest first, times on the runtime's clock) into the detector's timeline. `origin_ns` is the
-
 /// A measured timeline with what produced it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TimelineResult {
