@@ -6,6 +6,7 @@
 //! The origin is an absolute `CLOCK_MONOTONIC` reading ([`MonoClock::origin_ns`]); a receiver process is given it
 //! and rebuilds the same clock with [`MonoClock::with_origin`].
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 /// Nanoseconds since an origin on the host's monotonic clock. Copies share the origin.
@@ -22,6 +23,12 @@ fn monotonic_ns() -> u64 {
     let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
     debug_assert_eq!(rc, 0);
     (ts.tv_sec as u64).saturating_mul(1_000_000_000).saturating_add(ts.tv_nsec as u64)
+}
+
+/// A number distinguishing runs of this process (topic names of RTPS runs).
+pub(crate) fn run_number() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 impl MonoClock {

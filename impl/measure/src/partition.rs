@@ -14,71 +14,16 @@ use std::time::{Duration, Instant};
 use agent::{Agent, AgentConfig, AgentId};
 use anyhow::Context as _;
 use dsr::{NewNode, attrs};
-use serde::Serialize;
-use transport::fault::{FaultConfig, FaultInjector, FaultPlan};
+use transport::fault::{FaultInjector, FaultPlan};
 use transport::inproc::Bus;
 use transport::rtps::{RtpsConfig, RtpsTransport};
 use transport::{Clock, SystemClock, Transport};
 
 use crate::clock::MonoClock;
-use crate::run::Link;
+use crate::results::PartitionResult;
+use crate::spec::Link;
 
-/// How a partition experiment runs.
-#[derive(Clone, Debug)]
-pub struct PartitionConfig {
-    /// Agents (2 or more); the last one is isolated.
-    pub agents: u32,
-    /// How long the partition lasts.
-    pub partition: Duration,
-    /// Writes per second on each side during the partition.
-    pub rate_hz: f64,
-    /// The agents' anti-entropy announce period.
-    pub announce_period: Duration,
-    /// Seed of the fault injector.
-    pub seed: u64,
-    /// Background faults besides the partition (none by default).
-    pub faults: FaultConfig,
-    /// Give up waiting for equal digests after this long.
-    pub timeout: Duration,
-    /// How the agents are connected: [`Link::InProc`] or [`Link::Rtps`] (agents in this process either way).
-    pub link: Link,
-}
-
-impl Default for PartitionConfig {
-    fn default() -> Self {
-        PartitionConfig {
-            agents: 3,
-            partition: Duration::from_millis(500),
-            rate_hz: 100.0,
-            announce_period: Duration::from_millis(100),
-            seed: 1,
-            faults: FaultConfig::default(),
-            timeout: Duration::from_secs(10),
-            link: Link::InProc,
-        }
-    }
-}
-
-/// What one partition run measured.
-#[derive(Clone, Debug, Serialize)]
-pub struct PartitionResult {
-    /// `inproc` or `rtps`.
-    pub transport: String,
-    /// Agents.
-    pub agents: u32,
-    /// Seed.
-    pub seed: u64,
-    /// Partition length, ms.
-    pub partition_ms: u64,
-    /// Announce period, ms.
-    pub announce_period_ms: u64,
-    /// Writes made during the partition (both sides).
-    pub writes: u64,
-    /// Samples the injector dropped (the partition's cuts).
-    pub dropped: u64,
-    /// Nanoseconds from the heal to equal digests everywhere, or `None` if not within the timeout.
-    pub reconverge_ns: Option<u64>,
-}
+pub use crate::spec::PartitionConfig;
 
 /// Runs one partition experiment.
 ///
@@ -93,7 +38,7 @@ pub fn run(config: &PartitionConfig) -> anyhow::Result<PartitionResult> {
             run_on(config, || Ok(bus.attach(1 << 16)))
         }
         Link::Rtps { domain_id } => {
-            let topic_prefix = format!("partition{}_{}", std::process::id(), crate::run::clock_id());
+            let topic_prefix = format!("partition{}_{}", std::process::id(), crate::clock::run_number());
             run_on(config, || {
                 let rtps = RtpsConfig { domain_id, topic_prefix: topic_prefix.clone(), ..RtpsConfig::default() };
                 RtpsTransport::new(rtps).context("cannot create an RTPS participant")

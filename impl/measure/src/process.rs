@@ -33,10 +33,11 @@ use transport::rtps::{RtpsConfig, RtpsTransport};
 use transport::{Channel, Clock, Transport, TransportStats};
 
 use crate::clock::MonoClock;
-use crate::run::{
-    self, AgentCost, PROBE, Received, ReceiverOutcome, Receiving, RunConfig, RunResult, SourceSide, loopback_tx_bytes,
-    peak_rss_bytes, process_cpu_ns,
-};
+use crate::receiving::{PROBE, Received, ReceiverOutcome, Receiving};
+use crate::results::{AgentCost, RunResult};
+use crate::source::{self, SourceSide};
+use crate::spec::RunConfig;
+use crate::usage::{loopback_tx_bytes, peak_rss_bytes, process_cpu_ns};
 use crate::workload::Workload;
 
 /// First 8 bytes of a receiver's answer to a probe on `Sync`; the receiver's replica id follows (4 bytes, LE).
@@ -235,7 +236,7 @@ pub(crate) fn run(workload: &Workload, config: &RunConfig, domain_id: u16) -> an
         .as_deref()
         .context("a run with receiver processes needs the receiver program (RunConfig::receiver_program)")?;
     let clock = MonoClock::start();
-    let topic_prefix = format!("measurep{}_{}_{}", std::process::id(), config.agents, run::clock_id());
+    let topic_prefix = format!("measurep{}_{}_{}", std::process::id(), config.agents, crate::clock::run_number());
     let source = RtpsTransport::new(RtpsConfig {
         domain_id,
         topic_prefix: topic_prefix.clone(),
@@ -286,7 +287,7 @@ pub(crate) fn run(workload: &Workload, config: &RunConfig, domain_id: u16) -> an
             },
         });
     }
-    Ok(run::summarise(workload, config, source_side, outcomes))
+    Ok(source::summarise(workload, config, source_side, outcomes))
 }
 
 /// Probes, publishes and waits for the receivers to exit (or stops them).
@@ -297,7 +298,7 @@ fn measure(
     receivers: &mut [Receiver],
     clock: MonoClock,
 ) -> anyhow::Result<SourceSide> {
-    let samples = run::samples(workload);
+    let samples = source::samples(workload);
     let sample_bytes = samples.iter().map(|s| s.len() as u64).sum();
     let mut heard = std::collections::BTreeSet::new();
     let probe_deadline = clock.now_ns() + 30_000_000_000;
@@ -324,7 +325,7 @@ fn measure(
     let source_before = source.stats();
     let lo_before = loopback_tx_bytes();
     let start = clock.now_ns();
-    let (sent_at, source_cpu_ns, publish_error) = run::publish_all(source, workload, samples, clock, start);
+    let (sent_at, source_cpu_ns, publish_error) = source::publish_all(source, workload, samples, clock, start);
     if let Some(error) = publish_error {
         return Err(error).context("the source's transport refused a write");
     }

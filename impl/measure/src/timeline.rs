@@ -22,11 +22,10 @@
 //! finished. The derivation is pure, and [`run_with_clock`] takes any [`Clock`], so the tests run the same code on
 //! bica's virtual clock and check exact values; only [`run`] uses the real clock, and its numbers are measurements.
 
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::Context as _;
-use bica::core::{ComponentCounters, ComponentId, SchedulerConfig};
+use bica::core::{ComponentId, SchedulerConfig};
 use bica::prelude::*;
 use bica::trace::{Caller, TraceEvent};
 use bytes::Bytes;
@@ -37,148 +36,18 @@ use perception::labelling::{ColourClass, LabelConfig, LabelTables};
 use perception::sensors::{Encoding, Image, write_image};
 use replay::log::{Log, ReadOptions};
 use replay::ros2::{self, Ros2Message};
-use serde::{Deserialize, Serialize};
 
-use crate::figures::{self, Chart, Panel, Series};
+use crate::results::{PhaseSummary, StepRecord, Timeline, TimelineResult};
+use crate::spec::TimelineExperiment;
 
-/// Stem of the figure (`scheduler_timeline.svg` and `.png`).
-pub const FIGURE: &str = "scheduler_timeline";
-/// Heading of the report's section.
-pub const SECTION: &str = "## Scheduler timeline of a detector under overload";
-
-/// Longest run accepted, ms (the records of every step are kept).
-pub const MAX_DURATION_MS: u64 = 60_000;
 /// Interval between the samples of the sliding-window frequency, ms.
 pub const FREQUENCY_SAMPLE_MS: u64 = 10;
 /// The runtime is run in slices of this length, ms, and the trace ring drained after each.
 const SLICE_MS: u64 = 100;
 /// Capacity of the trace ring: far above what one slice produces (a few dozen events).
 const TRACE_CAPACITY: usize = 1 << 16;
-const MS: u64 = 1_000_000;
-
-fn default_window_ms() -> u64 {
-    250
-}
-
-fn default_miss_tolerance_us() -> u64 {
-    SchedulerConfig::default().miss_tolerance_ns / 1_000
-}
-
-/// The experiment: an optional `timeline` section of an experiment set.
-#[derive(Clone, Debug, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct TimelineExperiment {
-    /// The camera log whose images feed the detector (replayed on its recorded timing, looping).
-    pub log: PathBuf,
-    /// Period of the detector (and of its reader, labeller and the log camera), ms.
-    pub period_ms: u64,
-    /// Length of the run, ms.
-    pub duration_ms: u64,
-    /// Start of the overload window, ms after the start of the run.
-    pub overload_from_ms: u64,
-    /// End of the overload window (excluded), ms after the start of the run.
-    pub overload_until_ms: u64,
-    /// Period of the overloading component, ms.
-    pub overload_period_ms: u64,
-    /// Busy time of each of its steps that starts inside the window, ms.
-    pub overload_busy_ms: u64,
-    /// Width of the sliding window of the achieved frequency, ms.
-    #[serde(default = "default_window_ms")]
-    pub window_ms: u64,
-    /// A step is a miss when its lateness exceeds this, µs (the scheduler's `miss_tolerance_ns`).
-    #[serde(default = "default_miss_tolerance_us")]
-    pub miss_tolerance_us: u64,
-}
-
-impl TimelineExperiment {
-    /// Checks that the numbers make a run.
-    ///
-    /// # Errors
-    /// A zero period or window, a window outside the run, a run longer than [`MAX_DURATION_MS`].
-    pub fn validate(&self) -> anyhow::Result<()> {
-        anyhow::ensure!(self.period_ms > 0, "timeline: period_ms must be positive");
-        anyhow::ensure!(self.overload_period_ms > 0, "timeline: overload_period_ms must be positive");
-        anyhow::ensure!(self.window_ms > 0, "timeline: window_ms must be positive");
-        anyhow::ensure!(
-            self.duration_ms > 0 && self.duration_ms <= MAX_DURATION_MS,
-            "timeline: duration_ms must be in 1..={MAX_DURATION_MS}, not {}",
-            self.duration_ms
-        );
-        anyhow::ensure!(
-            self.overload_from_ms < self.overload_until_ms && self.overload_until_ms <= self.duration_ms,
-            "timeline: the overload window {}..{} ms must be non-empty and inside the run (0..{} ms)",
-            self.overload_from_ms,
-            self.overload_until_ms,
-            self.duration_ms
-        );
-        Ok(())
-    }
-}
-
-/// One top-level step of the detector. Times are nanoseconds after the start of the run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-pub struct StepRecord {
-    /// The release the step served.
-    pub release_ns: u64,
-    /// When its gated work started.
-    pub start_ns: u64,
-    /// When it finished.
-    pub finish_ns: u64,
-    /// `start_ns - release_ns`.
-    pub lateness_ns: u64,
-    /// Releases dropped before this one (never run later).
-    pub skipped_releases: u64,
-    /// Whether the scheduler raised a miss event for it.
-    pub miss: bool,
-}
-
-/// The detector's steps in one phase of the run: steps that started in `[from_ns, until_ns)`.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct PhaseSummary {
-    /// `before`, `during` or `after` the overload.
-    pub name: String,
-    /// Start of the phase, ns after the start of the run.
-    pub from_ns: u64,
-    /// End of the phase (excluded).
-    pub until_ns: u64,
-    /// Steps that started in it.
-    pub steps: u64,
-    /// `steps` over the phase's length.
-    pub frequency_hz: f64,
-    /// Largest lateness.
-    pub lateness_max_ns: u64,
-    /// Mean lateness.
-    pub lateness_mean_ns: u64,
-    /// Steps with a miss event.
-    pub misses: u64,
-    /// Releases skipped by these steps.
-    pub skipped_releases: u64,
-    /// Mean wall time of a step (start to finish).
-    pub step_mean_ns: u64,
-}
-
-/// What [`derive`] computes from the trace.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Timeline {
-    /// Every top-level step of the detector, in order.
-    pub steps: Vec<StepRecord>,
-    /// Achieved frequency `(t_ns, hz)`: steps started in `(t - window, t]` over the window, every
-    /// [`FREQUENCY_SAMPLE_MS`] from one window after the start to the end of the run.
-    pub frequency: Vec<(u64, f64)>,
-    /// Before, during and after the overload window.
-    pub phases: Vec<PhaseSummary>,
-    /// Largest lateness of any step.
-    pub lateness_max_ns: u64,
-    /// Steps with a miss event.
-    pub misses: u64,
-    /// Skipped releases, all steps.
-    pub skipped_releases: u64,
-    /// Top-level steps of every component in the trace.
-    pub top_level_steps: u64,
-    /// Top-level steps (of any component) that started before the previous one finished, or while another step was
-    /// in progress. The scheduler promises 0.
-    pub overlaps: u64,
-}
+/// Nanoseconds in a millisecond: the experiment's times are ms, the trace's ns.
+const NS_PER_MS: u64 = 1_000_000;
 
 /// Turns trace events (oldest first, times on the runtime's clock) into the detector's timeline. `origin_ns` is the
 /// start of the run on that clock; the phases come from `experiment`'s window and duration. Pure.
@@ -238,17 +107,17 @@ pub fn derive(
         }
     }
 
-    let duration_ns = experiment.duration_ms * MS;
-    let window_ns = experiment.window_ms * MS;
+    let duration_ns = experiment.duration_ms * NS_PER_MS;
+    let window_ns = experiment.window_ms * NS_PER_MS;
     let starts: Vec<u64> = steps.iter().map(|s| s.start_ns).collect();
     let mut frequency = Vec::new();
     let mut t = window_ns;
     while t <= duration_ns {
         let in_window = starts.partition_point(|&s| s <= t) - starts.partition_point(|&s| s <= t - window_ns);
         frequency.push((t, in_window as f64 / (window_ns as f64 / 1e9)));
-        t += FREQUENCY_SAMPLE_MS * MS;
+        t += FREQUENCY_SAMPLE_MS * NS_PER_MS;
     }
-    let (from_ns, until_ns) = (experiment.overload_from_ms * MS, experiment.overload_until_ms * MS);
+    let (from_ns, until_ns) = (experiment.overload_from_ms * NS_PER_MS, experiment.overload_until_ms * NS_PER_MS);
     let phases = [("before", 0, from_ns), ("during", from_ns, until_ns), ("after", until_ns, duration_ns)]
         .into_iter()
         .map(|(name, from, until)| phase(name, from, until, &steps))
@@ -280,44 +149,6 @@ fn phase(name: &str, from_ns: u64, until_ns: u64, steps: &[StepRecord]) -> Phase
         misses: inside.iter().filter(|s| s.miss).count() as u64,
         skipped_releases: inside.iter().map(|s| s.skipped_releases).sum(),
         step_mean_ns: mean(|s| s.finish_ns - s.start_ns),
-    }
-}
-
-/// A measured timeline with what produced it.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct TimelineResult {
-    /// The experiment as run.
-    pub experiment: TimelineExperiment,
-    /// The clock the runtime read (`bica::clock::MonotonicClock` for a measurement).
-    pub clock: String,
-    /// Type name of the detector component.
-    pub detector: String,
-    /// Type name of the overloading component.
-    pub overload_component: String,
-    /// Frames in the camera log.
-    pub log_frames: u64,
-    /// Frames the log camera wrote into the graph.
-    pub frames_written: u64,
-    /// Steps of the overloading component that busy-waited.
-    pub overload_busy_steps: u64,
-    /// The detector's counters kept by the scheduler core (runs, skipped releases, misses); they must agree with the
-    /// timeline derived from the trace.
-    pub counters: ComponentCounters,
-    /// Steps (of any component) whose `step` returned an error.
-    pub step_failures: u64,
-    /// Trace events lost because the ring was full (0, or the timeline is incomplete).
-    pub trace_dropped: u64,
-    /// The derived timeline.
-    pub timeline: Timeline,
-}
-
-impl TimelineResult {
-    /// Whether the trace-derived counts equal the scheduler core's counters.
-    pub fn counters_agree(&self) -> bool {
-        let t = &self.timeline;
-        self.counters.runs == t.steps.len() as u64
-            && self.counters.misses == t.misses
-            && self.counters.skipped_releases == t.skipped_releases
     }
 }
 
@@ -376,7 +207,7 @@ impl LogCamera {
     /// A camera playing `frames` (offsets from the first frame, ascending) into `camera` from `origin_ns` on.
     pub fn new(graph: SharedGraph, camera: NodeId, frames: Vec<(u64, Image)>, origin_ns: u64) -> Self {
         let last = frames.last().map_or(0, |f| f.0);
-        let gap = last.checked_div(frames.len().saturating_sub(1) as u64).unwrap_or(50 * MS).max(1);
+        let gap = last.checked_div(frames.len().saturating_sub(1) as u64).unwrap_or(50 * NS_PER_MS).max(1);
         Self { graph, camera, frames, loop_ns: last + gap, origin_ns, last_written: None, written: 0 }
     }
 
@@ -479,7 +310,7 @@ pub fn run_with_clock<C: Clock + Clone + 'static>(
         classes: vec![ColourClass { name: "bright".into(), min: [200; 3], max: [255; 3], display: [255, 255, 0] }],
     })?;
     let log_frames = frames.len() as u64;
-    let period_ns = experiment.period_ms * MS;
+    let period_ns = experiment.period_ms * NS_PER_MS;
     let origin_ns = clock.now_ns();
     runtime
         .register(LogCamera::new(graph.clone(), camera, frames, origin_ns), period_ns)
@@ -488,20 +319,22 @@ pub fn run_with_clock<C: Clock + Clone + 'static>(
     let blobs = BlobConfig { min_area_px: 200, ..BlobConfig::default() };
     perception::roles::camera_detector(&mut runtime, graph, "cam0", tables, blobs, experiment.period_ms)?;
     let overload = Overload::new(
-        origin_ns + experiment.overload_from_ms * MS,
-        origin_ns + experiment.overload_until_ms * MS,
-        experiment.overload_busy_ms * MS,
+        origin_ns + experiment.overload_from_ms * NS_PER_MS,
+        origin_ns + experiment.overload_until_ms * NS_PER_MS,
+        experiment.overload_busy_ms * NS_PER_MS,
         spend,
     );
-    runtime.register(overload, experiment.overload_period_ms * MS).map_err(bica_error("registering the overload"))?;
+    runtime
+        .register(overload, experiment.overload_period_ms * NS_PER_MS)
+        .map_err(bica_error("registering the overload"))?;
     runtime.activate::<Overload>().map_err(bica_error("activating the overload"))?;
     let detector = runtime.registry().handle::<BlobDetector>().map_err(bica_error("the detector"))?.id();
 
-    let end_ns = origin_ns + experiment.duration_ms * MS;
+    let end_ns = origin_ns + experiment.duration_ms * NS_PER_MS;
     let mut events = Vec::new();
     let mut slice_end_ns = origin_ns;
     while slice_end_ns < end_ns {
-        slice_end_ns = (slice_end_ns + SLICE_MS * MS).min(end_ns);
+        slice_end_ns = (slice_end_ns + SLICE_MS * NS_PER_MS).min(end_ns);
         runtime.run_until(slice_end_ns).map_err(bica_error("running"))?;
         events.extend(runtime.drain_trace());
     }
@@ -535,200 +368,10 @@ pub fn run(experiment: &TimelineExperiment, root: &Path) -> anyhow::Result<Timel
     run_with_clock(experiment, frames, clock, Box::new(move |busy_ns| busy_wait(&spin, busy_ns)))
 }
 
-fn ms(ns: u64) -> f64 {
-    ns as f64 / 1e6
-}
-
-/// Draws the figure: achieved frequency, lateness per step with the misses marked, and misses and skipped releases
-/// over time, the overload window shaded in each panel.
-///
-/// # Errors
-/// A file that cannot be written or a drawing error.
-pub fn render_figure(result: &TimelineResult, footer: Vec<String>, dir: &Path) -> anyhow::Result<()> {
-    let e = &result.experiment;
-    let t = &result.timeline;
-    let seconds = |ns: u64| ns as f64 / 1e9;
-    let x_range = Some((0.0, e.duration_ms as f64 / 1e3));
-    let shaded = Some((
-        e.overload_from_ms as f64 / 1e3,
-        e.overload_until_ms as f64 / 1e3,
-        format!("overload: {} ms busy every {} ms", e.overload_busy_ms, e.overload_period_ms),
-    ));
-    let nominal_hz = 1e3 / e.period_ms as f64;
-    let frequency = Panel {
-        chart: Chart {
-            title: format!(
-                "{} at {nominal_hz:.0} Hz on the real clock: achieved frequency ({} ms window)",
-                short_type(&result.detector),
-                e.window_ms
-            ),
-            x_label: "time (s)".into(),
-            y_label: "Hz".into(),
-            series: vec![
-                Series {
-                    name: "achieved".into(),
-                    points: t.frequency.iter().map(|&(t, hz)| (seconds(t), hz)).collect(),
-                },
-                Series {
-                    name: "nominal".into(),
-                    points: vec![(0.0, nominal_hz), (e.duration_ms as f64 / 1e3, nominal_hz)],
-                },
-            ],
-            ..Chart::default()
-        },
-        x_range,
-        shaded: shaded.clone(),
-        ..Panel::default()
-    };
-    let lateness = Panel {
-        chart: Chart {
-            title: "Lateness of each step (start minus release)".into(),
-            x_label: "time of the step's start (s)".into(),
-            y_label: "ms".into(),
-            series: vec![Series {
-                name: "lateness".into(),
-                points: t.steps.iter().map(|s| (seconds(s.start_ns), ms(s.lateness_ns))).collect(),
-            }],
-            legend_upper_left: true,
-            ..Chart::default()
-        },
-        markers: vec![Series {
-            name: format!("miss (lateness > {} µs)", e.miss_tolerance_us),
-            points: t.steps.iter().filter(|s| s.miss).map(|s| (seconds(s.start_ns), ms(s.lateness_ns))).collect(),
-        }],
-        x_range,
-        shaded: shaded.clone(),
-    };
-    let mut misses = vec![(0.0, 0.0)];
-    let mut skipped = vec![(0.0, 0.0)];
-    let (mut m, mut k) = (0.0, 0.0);
-    // Drawn as staircases: a count changes at a step's start and holds until the next change.
-    for s in &t.steps {
-        let at = seconds(s.start_ns);
-        if s.miss {
-            misses.push((at, m));
-            m += 1.0;
-            misses.push((at, m));
-        }
-        if s.skipped_releases > 0 {
-            skipped.push((at, k));
-            k += s.skipped_releases as f64;
-            skipped.push((at, k));
-        }
-    }
-    let end = e.duration_ms as f64 / 1e3;
-    misses.push((end, m));
-    skipped.push((end, k));
-    let cumulative = Panel {
-        chart: Chart {
-            title: "Misses and skipped releases so far".into(),
-            x_label: "time (s)".into(),
-            y_label: "count".into(),
-            series: vec![
-                Series { name: "misses".into(), points: misses },
-                Series { name: "skipped releases".into(), points: skipped },
-            ],
-            legend_upper_left: true,
-            ..Chart::default()
-        },
-        x_range,
-        shaded,
-        ..Panel::default()
-    };
-    figures::render_panels(&[frequency, lateness, cumulative], &footer, dir, FIGURE)
-}
-
-fn short_type(name: &str) -> &str {
-    name.rsplit("::").next().unwrap_or(name)
-}
-
-/// Appends the report's section: how the timeline was obtained, the figure and a table per phase. With no result
-/// (the set has no `timeline` section), says so.
-pub fn section(md: &mut String, result: Option<&TimelineResult>) {
-    let _ = writeln!(md, "{SECTION}\n");
-    let Some(r) = result else {
-        let _ = writeln!(md, "Not run: this experiment set has no `timeline` section.\n");
-        return;
-    };
-    let e = &r.experiment;
-    let t = &r.timeline;
-    let _ = writeln!(
-        md,
-        "Measured on the **real monotonic clock** (`{}`), one `bica::Runtime` on one thread, not a simulation: the \
-         `camera-detector` role of `perception::roles` (camera reader → colour labeller → `{}`, period {} ms) on the \
-         {} frames of `{}` (played on their recorded timing, looping, by a `LogCamera` component in the same \
-         scheduler), for {} ms. The overload is another component in the same single-threaded scheduler, `{}`, \
-         period {} ms, whose steps that start between {} ms and {} ms busy-wait {} ms (it spins on the clock, so it \
-         really holds the thread); it is not work inside the detector, so the detector's own cost is unchanged and \
-         the figure shows what the scheduler does to the victim of another component's overrun. Every step comes \
-         from the bica trace ring (release, start, finish, lateness, skipped releases, miss events; {} events \
-         dropped); a miss is a lateness above {} µs. Frequency is the number of steps started in the last {} ms over \
-         {} ms. A run of the machine's scheduler, so the numbers vary from run to run.\n",
-        r.clock,
-        r.detector,
-        e.period_ms,
-        r.log_frames,
-        e.log.display(),
-        e.duration_ms,
-        r.overload_component,
-        e.overload_period_ms,
-        e.overload_from_ms,
-        e.overload_until_ms,
-        e.overload_busy_ms,
-        r.trace_dropped,
-        e.miss_tolerance_us,
-        e.window_ms,
-        e.window_ms
-    );
-    let _ = writeln!(
-        md,
-        "![scheduler timeline of the detector under overload]({FIGURE}.svg)\n\n(also [{FIGURE}.png]({FIGURE}.png))\n"
-    );
-    let _ = writeln!(
-        md,
-        "| phase | from ms | to ms | steps | achieved Hz | lateness mean ms | lateness max ms | misses | skipped releases | step mean ms |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-    );
-    for p in &t.phases {
-        let _ = writeln!(
-            md,
-            "| {} | {:.0} | {:.0} | {} | {:.1} | {:.3} | {:.3} | {} | {} | {:.3} |",
-            p.name,
-            ms(p.from_ns),
-            ms(p.until_ns),
-            p.steps,
-            p.frequency_hz,
-            ms(p.lateness_mean_ns),
-            ms(p.lateness_max_ns),
-            p.misses,
-            p.skipped_releases,
-            ms(p.step_mean_ns)
-        );
-    }
-    let _ = writeln!(
-        md,
-        "\nNominal {:.1} Hz. Over the whole run: {} steps, largest lateness {:.3} ms, {} misses, {} skipped releases \
-         (never run late as a burst), {} overlapping top-level steps out of {} (no step started before the previous \
-         one finished: {}), {} failed steps; the overload busy-waited in {} steps; the scheduler core's own counters \
-         (runs {}, misses {}, skipped {}) {} the trace.\n",
-        1e3 / e.period_ms as f64,
-        t.steps.len(),
-        ms(t.lateness_max_ns),
-        t.misses,
-        t.skipped_releases,
-        t.overlaps,
-        t.top_level_steps,
-        if t.overlaps == 0 { "yes" } else { "**no**" },
-        r.step_failures,
-        r.overload_busy_steps,
-        r.counters.runs,
-        r.counters.misses,
-        r.counters.skipped_releases,
-        if r.counters_agree() { "agree with" } else { "**disagree with**" }
-    );
-}
-
 #[cfg(test)]
 mod tests {
+    use std::path::PathBuf;
+
     use super::*;
     use bica::trace::MissEvent;
 
@@ -762,7 +405,7 @@ mod tests {
         let spender = clock.clone();
         let result = run_with_clock(&experiment(), frames, clock, Box::new(move |ns| spender.advance_ns(ns))).unwrap();
         let t = &result.timeline;
-        let starts_ms: Vec<u64> = t.steps.iter().map(|s| s.start_ns / MS).collect();
+        let starts_ms: Vec<u64> = t.steps.iter().map(|s| s.start_ns / NS_PER_MS).collect();
         let mut expected: Vec<u64> = (0..20).map(|k| k * 50).collect();
         expected.extend([1000, 1120, 1240, 1360, 1480, 1600, 1720, 1840, 1960, 2080]);
         expected.extend((2100..3000).step_by(50));
@@ -771,7 +414,7 @@ mod tests {
             .steps
             .iter()
             .filter(|s| s.miss)
-            .map(|s| (s.release_ns / MS, s.lateness_ns / MS, s.skipped_releases))
+            .map(|s| (s.release_ns / NS_PER_MS, s.lateness_ns / NS_PER_MS, s.skipped_releases))
             .collect();
         assert_eq!(
             late,
@@ -783,7 +426,7 @@ mod tests {
         assert!(t.steps.iter().filter(|s| !s.miss).all(|s| s.lateness_ns == 0 && s.skipped_releases == 0));
         let per_phase: Vec<(u64, f64, u64)> = t.phases.iter().map(|p| (p.steps, p.frequency_hz, p.misses)).collect();
         assert_eq!(per_phase, [(20, 20.0, 0), (9, 9.0, 8), (19, 19.0, 1)]);
-        assert_eq!((t.lateness_max_ns, t.misses, t.skipped_releases, t.overlaps), (110 * MS, 9, 12, 0));
+        assert_eq!((t.lateness_max_ns, t.misses, t.skipped_releases, t.overlaps), (110 * NS_PER_MS, 9, 12, 0));
         assert_eq!(t.steps.len() as u64 + t.skipped_releases, 60, "every release of 0..3000 ms served or skipped");
         assert!(result.counters_agree(), "{:?} vs the trace", result.counters);
         assert_eq!((result.overload_busy_steps, result.step_failures, result.trace_dropped), (9, 0, 0));
@@ -792,7 +435,7 @@ mod tests {
         // as the recorded frames are not exactly 50 ms apart.
         assert!((1..=48).contains(&result.frames_written), "{} frames written", result.frames_written);
         // The window holds five steps at 20 Hz: 20 Hz before the overload, at most 2 steps in a window inside it.
-        let at = |ms: u64| t.frequency.iter().find(|(t, _)| *t == ms * MS).unwrap().1;
+        let at = |ms: u64| t.frequency.iter().find(|(t, _)| *t == ms * NS_PER_MS).unwrap().1;
         assert_eq!((at(250), at(1000), at(1500), at(2990)), (20.0, 20.0, 8.0, 20.0));
         assert_eq!(t.frequency.len(), 276);
     }
@@ -817,9 +460,9 @@ mod tests {
         let detector = ComponentId(1);
         let miss = MissEvent {
             component: detector,
-            expected_ns: 1_050 * MS,
-            actual_ns: 1_100 * MS,
-            lateness_ns: 50 * MS,
+            expected_ns: 1_050 * NS_PER_MS,
+            actual_ns: 1_100 * NS_PER_MS,
+            lateness_ns: 50 * NS_PER_MS,
             skipped_periods: 0,
             warn: true,
             suppressed_since_last_warning: 0,
@@ -832,13 +475,13 @@ mod tests {
             finished(1, origin + 3),
             // Component 2 overlaps the detector's finish by timestamp: counted.
             started(2, Caller::TopLevel, origin + 2, origin + 2),
-            finished(2, 1_100 * MS),
+            finished(2, 1_100 * NS_PER_MS),
             TraceEvent::Miss(miss),
-            started(1, Caller::TopLevel, 1_100 * MS, 1_050 * MS),
+            started(1, Caller::TopLevel, 1_100 * NS_PER_MS, 1_050 * NS_PER_MS),
             // Component 2 started while the detector is still running: counted.
-            started(2, Caller::TopLevel, 1_101 * MS, 1_100 * MS),
-            finished(2, 1_102 * MS),
-            finished(1, 1_103 * MS),
+            started(2, Caller::TopLevel, 1_101 * NS_PER_MS, 1_100 * NS_PER_MS),
+            finished(2, 1_102 * NS_PER_MS),
+            finished(1, 1_103 * NS_PER_MS),
         ];
         let t = derive(&events, detector, origin, &experiment());
         assert_eq!(
@@ -853,10 +496,10 @@ mod tests {
                     miss: false
                 },
                 StepRecord {
-                    release_ns: 1_050 * MS - origin,
-                    start_ns: 1_100 * MS - origin,
-                    finish_ns: 1_103 * MS - origin,
-                    lateness_ns: 50 * MS,
+                    release_ns: 1_050 * NS_PER_MS - origin,
+                    start_ns: 1_100 * NS_PER_MS - origin,
+                    finish_ns: 1_103 * NS_PER_MS - origin,
+                    lateness_ns: 50 * NS_PER_MS,
                     skipped_releases: 0,
                     miss: true
                 },
@@ -864,7 +507,7 @@ mod tests {
         );
         assert_eq!((t.top_level_steps, t.overlaps, t.misses), (4, 2, 1));
         assert_eq!(t.phases.iter().map(|p| p.steps).collect::<Vec<_>>(), [1, 1, 0]);
-        assert_eq!(t.phases[1].lateness_max_ns, 50 * MS);
+        assert_eq!(t.phases[1].lateness_max_ns, 50 * NS_PER_MS);
         assert_eq!(t.phases[0].frequency_hz, 1.0);
     }
 
@@ -882,7 +525,7 @@ mod tests {
         let frames = camera_frames(&log_path()).unwrap();
         assert_eq!(frames.len(), 20);
         assert_eq!(frames[0].0, 0);
-        assert!(frames.windows(2).all(|w| (40 * MS..60 * MS).contains(&(w[1].0 - w[0].0))));
+        assert!(frames.windows(2).all(|w| (40 * NS_PER_MS..60 * NS_PER_MS).contains(&(w[1].0 - w[0].0))));
         assert_eq!((frames[0].1.width, frames[0].1.height, frames[0].1.encoding), (752, 480, Encoding::Mono8));
     }
 }

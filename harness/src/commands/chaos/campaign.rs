@@ -21,6 +21,7 @@ use transport::rng::SplitMix64;
 use super::net::{Filter, Network};
 use super::procs::{Launch, Line, Proc, log_tail};
 use agent::StatusLine;
+use measure::units::ms_from_duration;
 
 use super::protocol::{Command, FinalState, Report, WriteRecord, parse_report};
 use super::record::{CampaignConfig, EpisodeResult, Event, Recorded, Segment, Shown};
@@ -118,12 +119,13 @@ impl Campaign {
         })
     }
 
-    fn ms(&self, at: Instant) -> f64 {
-        at.saturating_duration_since(self.started).as_secs_f64() * 1e3
+    /// Milliseconds from the start of the campaign to `at`.
+    fn elapsed_ms(&self, at: Instant) -> f64 {
+        ms_from_duration(at.saturating_duration_since(self.started))
     }
 
     fn now_ms(&self) -> f64 {
-        self.ms(Instant::now())
+        self.elapsed_ms(Instant::now())
     }
 
     fn log(&mut self, event: &Event) -> Result<()> {
@@ -221,7 +223,7 @@ impl Campaign {
 
     fn episode(&mut self, index: usize, episode: &Episode) -> Result<EpisodeResult> {
         let start = Instant::now();
-        let t_ms = self.ms(start);
+        let t_ms = self.elapsed_ms(start);
         self.log(&Event::Fault { t_ms, episode: index, fault: episode.fault.clone() })?;
         self.writing = true;
         let fault_for = Duration::from_millis(episode.fault_ms);
@@ -253,17 +255,16 @@ impl Campaign {
         }
         self.writing = false;
         let heal = Instant::now();
-        let heal_ms = self.ms(heal);
+        let heal_ms = self.elapsed_ms(heal);
         self.log(&Event::Heal { t_ms: heal_ms, episode: index })?;
         let (heard, converged) = self.converge(heal)?;
         let t_ms = self.now_ms();
-        let ms = |d: Option<Duration>| d.map(|d| d.as_secs_f64() * 1e3);
-        let (heal_to_heard_ms, heal_to_converge_ms) = (ms(heard), ms(converged));
+        let (heal_to_heard_ms, heal_to_converge_ms) = (heard.map(ms_from_duration), converged.map(ms_from_duration));
         self.log(&Event::Converged { t_ms, episode: index, heal_to_heard_ms, heal_to_converge_ms })?;
         Ok(EpisodeResult {
             kind: episode.fault.kind().to_owned(),
             description: episode.fault.describe(),
-            start_ms: self.ms(start),
+            start_ms: self.elapsed_ms(start),
             heal_ms,
             heal_to_heard_ms,
             heal_to_converge_ms,
@@ -375,7 +376,7 @@ impl Campaign {
         if self.slots[slot].proc.as_ref().is_none_or(|p| p.life != line.life) {
             return Ok(());
         }
-        let t_ms = self.ms(line.at);
+        let t_ms = self.elapsed_ms(line.at);
         let Some(text) = line.text else {
             let tail = log_tail(&self.launch.dir, slot);
             self.problems.push(format!("agent {slot} (life {}) exited by itself at {t_ms:.0} ms: {tail}", line.life));

@@ -1,0 +1,159 @@
+//! The text output of `cortex bench`: the benchmarks' figures as tables, with how they were counted.
+
+use measure::bench::fanout::{FanoutFigures, FanoutResult};
+use measure::bench::join::{JoinBreakdown, JoinResult};
+use measure::bench::rtt::RttResult;
+use measure::bench::{Counting, loadavg};
+
+/// The RTT table: agent and raw loops of every delivery, then the socket-level bytes or why they are missing.
+pub(super) fn rtt(result: &RttResult, counting: &Counting) {
+    println!(
+        "RTT, {} B payload, {} Hz, {} pings, two processes {}, multicast {}",
+        result.payload,
+        result.rate_hz,
+        result.count,
+        counting.place(),
+        if result.multicast { "on" } else { "off" }
+    );
+    println!(
+        "{:<26} {:>7} {:>7} {:>7} {:>7} {:>5} {:>8} {:>14} {:>12} {:>12} {:>9}",
+        "",
+        "p50 us",
+        "p90 us",
+        "p99 us",
+        "max us",
+        "lost",
+        "repairs",
+        "envelope B/upd",
+        "est. wire B",
+        "socket B/upd",
+        "pkts/upd"
+    );
+    for run in &result.runs {
+        for (who, f) in [("agent", &run.agent), ("raw rustdds", &run.raw)] {
+            let (socket_bytes, packets) = match &f.socket {
+                Some(s) => (format!("{:.1}", s.bytes_per_update), format!("{:.2}", s.packets_per_update)),
+                None => ("-".into(), "-".into()),
+            };
+            let repairs = f.gap_requests.map_or("-".into(), |n| n.to_string());
+            let name = format!("{who}, {}", run.updates);
+            println!(
+                "{name:<26} {:>7} {:>7} {:>7} {:>7} {:>5} {repairs:>8} {:>14.1} {:>12.1} {socket_bytes:>12} {packets:>9}",
+                f.p50_us, f.p90_us, f.p99_us, f.max_us, f.lost, f.envelope_bytes_per_update, f.wire_bytes_per_update
+            );
+        }
+    }
+    for run in &result.runs {
+        println!("{} updates: agent p50 / raw p50 = {:.2}", run.updates, run.p50_ratio);
+    }
+    match counting {
+        Counting::Socket => rtt_socket(result),
+        Counting::EstimateOnly(why) => println!("socket-level bytes not measured ({why}); est. wire B is an estimate"),
+    }
+}
+
+fn rtt_socket(result: &RttResult) {
+    for run in &result.runs {
+        for (who, f) in [("agent (discovery + join)", &run.agent), ("raw rustdds (discovery)", &run.raw)] {
+            if let Some(s) = &f.socket {
+                println!(
+                    "{who}, {}: {} B in {} packets before the first echo; steady state {} B in {} packets \
+                     ({} B multicast) for {} updates (pings + pongs)",
+                    run.updates,
+                    s.discovery.tx_bytes,
+                    s.discovery.tx_packets,
+                    s.steady.tx_bytes,
+                    s.steady.tx_packets,
+                    s.steady.tx_multicast_bytes,
+                    s.updates
+                );
+            }
+        }
+    }
+    println!(
+        "socket B/upd: loopback tx bytes (IPv4 + UDP + RTPS, acknowledgements, heartbeats, periodic discovery, \
+         anti-entropy) in the steady state / updates both ways; est. wire B: the transport's estimate for one \
+         sample; repairs: the pinging agent's gap requests"
+    );
+}
+
+/// The join: in-process snapshot figures, the new process's count, the breakdown and the load average.
+pub(super) fn join(result: &JoinResult) {
+    println!("join of a {}-node graph (tree, 6 attributes + 1 RT edge per node)", result.nodes);
+    println!(
+        "  in process: snapshot {} bytes; encode {:.1} ms; encode+decode+join {:.1} ms",
+        result.snapshot_bytes, result.snapshot_encode_ms, result.snapshot_encode_decode_join_ms
+    );
+    println!(
+        "  new agent process: {} of {} nodes, {} graph request(s)",
+        result.process.nodes, result.nodes, result.process.join_requests
+    );
+    breakdown(&result.breakdown);
+    println!("  load average: {}", loadavg());
+}
+
+fn breakdown(b: &JoinBreakdown) {
+    let show = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.1} ms"));
+    println!("  timeline, from spawning the joining process:");
+    for (name, at) in &b.at_ms {
+        println!("    {name:<38} {:>10}", show(*at));
+    }
+    println!("  total (spawn → ready)                  {:>10}", show(b.total_ms));
+    println!("  discovery (participant → sync matched) {:>10}", show(b.discovery_ms));
+    println!("  request received → ready               {:>10}", show(b.request_to_ready_ms));
+    let cached = match b.server_snapshot_cached {
+        Some(true) => " (cached)",
+        Some(false) => " (encoded)",
+        None => "",
+    };
+    println!("    server snapshot{cached:<11}            {:>10}", show(b.server_encode_ms));
+    println!("    server publish                       {:>10}", show(b.server_publish_ms));
+    println!("    transfer (encoded → received)        {:>10}", show(b.transfer_ms));
+    println!("    decode                               {:>10}", show(b.decode_ms));
+    println!("    join                                 {:>10}", show(b.join_ms));
+}
+
+/// The fan-out table, one row per run, then how the bytes were counted.
+pub(super) fn fanout(result: &FanoutResult, counting: &Counting) {
+    for (index, run) in result.runs.iter().enumerate() {
+        fanout_row(run, index == 0, result.rate_hz, counting);
+    }
+    match counting {
+        Counting::EstimateOnly(why) => println!("socket-level bytes not measured ({why})"),
+        Counting::Socket => println!(
+            "bytes: loopback tx (IPv4 + UDP + RTPS, acknowledgements, heartbeats) from the first frame until every \
+             reader reported its count, per frame sent; copies = bytes per frame / payload; mcast = share of those \
+             bytes sent to a multicast group. Each multicast setting ran in its own namespace (`lo` multicast-capable \
+             unless `off`)."
+        ),
+    }
+}
+
+fn fanout_row(run: &FanoutFigures, header: bool, rate: f64, counting: &Counting) {
+    if header {
+        println!(
+            "fan-out: one writer of {} B samples at {rate} Hz, {} samples, to N reader processes {}",
+            run.payload_bytes,
+            run.frames,
+            counting.place()
+        );
+        println!(
+            "{:>9} {:>3} {:>10} {:>12} {:>14} {:>8} {:>7} {:>9} {:>12}",
+            "multicast", "N", "delivered", "discovery B", "bytes/frame", "copies", "mcast", "MB/s", "est. B/frame"
+        );
+    }
+    let fmt = |v: Option<f64>, digits: usize| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"));
+    let mcast_share = run.steady.map(|s| s.tx_multicast_bytes as f64 / s.tx_bytes.max(1) as f64 * 100.0);
+    println!(
+        "{:>9} {:>3} {:>10} {:>12} {:>14} {:>8} {:>7} {:>9} {:>12}",
+        format!("{}{}", run.multicast_setting, if run.multicast { "" } else { "*" }),
+        run.readers,
+        format!("{}/{}", run.delivered_min, run.frames),
+        run.discovery.map_or_else(|| "-".to_owned(), |d| d.tx_bytes.to_string()),
+        fmt(run.bytes_per_frame, 0),
+        fmt(run.copies_per_frame, 2),
+        mcast_share.map_or_else(|| "-".to_owned(), |v| format!("{v:.0}%")),
+        fmt(run.megabytes_per_second, 2),
+        run.estimated_wire_bytes_per_frame,
+    );
+}

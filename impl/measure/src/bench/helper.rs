@@ -1,0 +1,87 @@
+//! The helper processes of the benchmarks: the program given to a benchmark (the `cortex` binary) started with one
+//! of the command lines here, which its hidden `bench` subcommands implement by calling the helper bodies
+//! ([`super::rtt::echo`], [`super::join::child`], [`super::fanout::reader`]). A helper is killed when dropped.
+
+use std::path::Path;
+use std::process::{Child, ChildStdout, Command, Stdio};
+
+use anyhow::Context as _;
+use transport::rtps::{Multicast, UpdateDelivery};
+
+use super::multicast_name;
+
+/// A helper process, killed when dropped.
+#[derive(Debug)]
+pub struct Helper(Child);
+
+impl Helper {
+    /// Starts `program` with `args`, its standard output piped to this process.
+    ///
+    /// # Errors
+    /// The program cannot be started.
+    pub fn spawn(program: &Path, args: &[String]) -> anyhow::Result<Helper> {
+        let child = Command::new(program)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .with_context(|| format!("starting a helper process ({})", program.display()))?;
+        Ok(Helper(child))
+    }
+
+    /// The helper's standard output (once).
+    pub fn take_stdout(&mut self) -> Option<ChildStdout> {
+        self.0.stdout.take()
+    }
+}
+
+impl Drop for Helper {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `bench echo`: echoes pings, raw samples or through an agent.
+pub fn echo_args(domain: u16, prefix: &str, raw: bool, multicast: Multicast, updates: UpdateDelivery) -> Vec<String> {
+    let mut args = vec!["bench".into(), "echo".into(), "--domain".into(), domain.to_string(), "--prefix".into()];
+    args.push(prefix.into());
+    if raw {
+        args.push("--raw".into());
+    }
+    args.extend(["--multicast".into(), multicast_name(multicast).into(), "--updates".into(), updates.name().into()]);
+    args
+}
+
+/// `bench join-child`: joins, then prints its [`super::join::JoinChildReport`] as one JSON line.
+pub fn join_child_args(domain: u16, prefix: &str, nodes: u32) -> Vec<String> {
+    ["bench", "join-child", "--domain", &domain.to_string(), "--prefix", prefix, "--nodes", &nodes.to_string()]
+        .map(String::from)
+        .to_vec()
+}
+
+/// `bench fanout-reader`: counts the fan-out's samples and reports the count.
+pub fn fanout_reader_args(domain: u16, prefix: &str, multicast: Multicast) -> Vec<String> {
+    ["bench", "fanout-reader", "--domain", &domain.to_string(), "--prefix", prefix, "--multicast"]
+        .map(String::from)
+        .into_iter()
+        .chain([multicast_name(multicast).to_owned()])
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn helper_command_lines_name_every_setting() {
+        let echo = echo_args(3, "p", true, Multicast::Off, UpdateDelivery::Reliable);
+        assert_eq!(echo.join(" "), "bench echo --domain 3 --prefix p --raw --multicast off --updates reliable");
+        assert_eq!(join_child_args(1, "j", 10).join(" "), "bench join-child --domain 1 --prefix j --nodes 10");
+        assert_eq!(
+            fanout_reader_args(2, "f", Multicast::On).join(" "),
+            "bench fanout-reader --domain 2 --prefix f --multicast on"
+        );
+    }
+}
