@@ -23,25 +23,67 @@
 //!
 //! # How properties are checked
 //!
-//! Each transition drains the core's trace and audits it against a small reference of the documented
-//! policy (next release on the phase-preserving grid, last time seen, pending reactivation gap, rate-limiter
-//! state; all of these mirror what the correct core keeps, so they do not enlarge the state space). The audit
-//! records, in the new state, one bit per violated property (and a human-readable finding), and one bit per
-//! interesting fact observed (an overrun, a miss, ...). The `always` properties test those bits, so a
+//! The properties are stated over the trace itself, never against a copy of the core's bookkeeping: each
+//! transition drains the core's trace and walks it (module `audit`) next to what the model itself decided (the
+//! driver calls it made, at its virtual times, with the durations it chose, and the request it served) and a
+//! small per-component summary of earlier trace events (module `summary`: in the active list or not, the release
+//! grid, the release of the last run, when it was last seen, the gap owed, the last miss warning and the misses
+//! since). So a bug shared by the core and a reference cannot pass: what a run must serve is read off the grid the
+//! trace defines, not computed the way the core computes it. Stated over the trace:
+//!
+//! - the trace records every driver call as made (component, caller, time), and each served request's
+//!   `Activated`/`Deactivated` event at once; no other such event appears (`CallsAccepted`, `QuietShutdown`);
+//! - no overlap: a step starts only when the previous top-level step has finished, a nested one only inside its
+//!   parent, never inside itself; time never goes back; the trace ends with nothing running (`NoOverlap`,
+//!   `NoCancellation`);
+//! - the grid: the releases of a component are `r0 + k·T`, `r0` being the time of the `Activated` event that
+//!   started the grid (or of its first call, for the dependency, which is never activated; or of a call after a
+//!   gap of more than k periods), unless a release of the old grid was still ahead then (the old grid goes on).
+//!   A run serves the oldest grid point no earlier run passed, never before it (`RateLimit`); its release is at
+//!   least a period after the last run's release (`RateLimit`); its reported lateness is the driver's start time
+//!   minus that release and its skipped count the number of grid points that passed unrun before its start
+//!   (`SkippedReleasesCounted`); the dependency runs only when a release of its grid is pending, at most once a
+//!   step, and is gated otherwise, the gate naming that release (`SharedDependencyOncePerPeriod`);
+//! - a miss event precedes a run exactly when that lateness exceeds the tolerance, carrying the run's values
+//!   (`MissExactness`); a miss warns exactly when no warning of its component appears in the trace in the last
+//!   interval, reporting the misses since the last warning, and the counters move by what the trace shows
+//!   (`CountersNeverLost`);
+//! - after a `Deactivated` event, no top-level run of the component until an `Activated` event (`QuietShutdown`);
+//! - a `Reactivated` event precedes a run exactly when the component came back (activation, or call of the
+//!   dependency) more than k periods after its last step call or `Deactivated` event in the trace, reporting that
+//!   time (`ReactivationSignalled`);
+//! - with what the model chose: a top-level run's lateness is at most the overrun so far plus one round, and the
+//!   driver never sleeps while an active component's grid has a release due (`LatenessBound`); a run released a
+//!   period after the last overrun ended is on time (`Recovery`).
+//!
+//! Not over the trace alone: `Determinism` compares two runs of a transition (states, traces, findings);
+//! `IllegalCallsRefused` is checked on each probe's result and on the trace it leaves in its copy of
+//! the core (an accepted illegal finish shows there as a `StepFinished` of a step that is not running), but that a
+//! refused call changed nothing hidden can only be seen by comparing the copy with the core (a refusal leaves no
+//! trace); `CountersNeverLost` reads the core's
+//! counters and dropped-event count to compare them with the trace; `NoCancellation` also asks the core that no
+//! step is left running; and the decisions the driver follows (step or sleep) are the core's answers, as in the
+//! runtime.
+//!
+//! The audit records, in the new state, one bit per violated property (and a human-readable finding), and one
+//! bit per interesting fact observed (an overrun, a miss, ...). The `always` properties test those bits, so a
 //! counterexample ends exactly at the transition that broke the property; the `sometimes` properties show the
 //! model really reaches overruns, misses, deactivations and reactivations, and the preconditions of the `always`
 //! ones that a step need not meet (a run a period after an overload ended, for recovery; a late run within the
-//! tolerance; a run later than one round; a nested step; a request during a sleep; an illegal call during a step). The events and findings of the
-//! last transition are kept for display only: they take no part in the state's identity.
+//! tolerance; a run later than one round; a nested step; a request during a sleep; an illegal call during a
+//! step). The events and findings of the last transition are kept for display only: they take no part in the
+//! state's identity; the summaries do, and cost unique states over the earlier reference (which mirrored the
+//! core's own fields): see `model/tests/scheduler_model.rs` for the pinned count.
 
 use std::sync::Arc;
 
 use bica::core::{ComponentId, Decision, SchedulerCore};
-
-use state::{Reference, ns};
+use bica::trace::TraceEvent;
 use stateright::{Model, Property};
 
 use crate::report::{CheckOptions, CheckReport, run_check};
+use state::ns;
+use summary::Seen;
 
 mod audit;
 mod checks;
@@ -51,6 +93,7 @@ mod driver;
 mod mutants;
 mod probes;
 mod state;
+mod summary;
 
 pub use checks::{Check, Fact};
 pub use config::{DependencySpec, SchedulerModelConfig, TopLevelSpec};
@@ -85,17 +128,23 @@ impl SchedulerModel {
         for index in 0..self.config.registered() {
             core.register(self.config.period_ns(index)).expect("validated periods are positive");
         }
-        let mut reference = vec![Reference::default(); self.config.registered()];
-        for (index, entry) in reference.iter_mut().enumerate().take(self.config.components.len()) {
+        for index in 0..self.config.components.len() {
             core.activate(ComponentId(index as u32), 0).expect("activation at time 0 is accepted");
-            entry.active = true;
-            entry.next_release_ns = Some(0);
         }
         let events = core.drain_trace();
+        // The summaries start from the activations the trace shows.
+        let mut seen = vec![Seen::default(); self.config.registered()];
+        for event in &events {
+            if let TraceEvent::Activated { component, at_ns } = *event {
+                let index = component.0 as usize;
+                let period = self.config.period_ns(index);
+                seen[index].activated(at_ns, period.saturating_mul(self.config.reactivation_gap_periods), period);
+            }
+        }
         SchedulerState {
             core,
             now_ns: 0,
-            reference,
+            seen,
             overruns: 0,
             overrun_excess_ns: 0,
             overload_end_ns: None,

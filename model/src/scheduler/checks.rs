@@ -11,14 +11,17 @@ pub enum Check {
     NoOverlap,
     /// Every started step finishes (within its transition); nothing is left running between iterations.
     NoCancellation,
-    /// Every driver call the policy allows is accepted by the core, and the decided top-level component's
-    /// gate is open.
+    /// Every driver call the policy allows is accepted by the core, the trace records each accepted step call
+    /// as the driver made it and each served request's list event, and the decided top-level component's gate
+    /// is open.
     CallsAccepted,
-    /// A run never starts before its release, never serves a release that an earlier run served or dropped:
-    /// two runs of a component never fall in one period of its grid.
+    /// A run never starts before its release, never serves a release that an earlier run served or dropped
+    /// (a grid point at or before the last run's start), and serves a release at least one period after the
+    /// last run's: two runs of a component never fall in one period of its grid.
     RateLimit,
-    /// Runs serve the phase-preserving grid: the oldest pending release, lateness = start − release, and
-    /// skipped = lateness / period releases dropped (never caught up).
+    /// Runs serve the phase-preserving grid `r0 + k·T` the trace defines (`r0` from the activation that started
+    /// it): the oldest pending release, lateness = the driver's start − release, and skipped = the grid points
+    /// that passed unrun (dropped, never caught up).
     SkippedReleasesCounted,
     /// A nested call runs the shared dependency's work iff one of its releases is pending: a second parent's
     /// call in the same period is a gated skip.
@@ -35,9 +38,11 @@ pub enum Check {
     /// Miss warnings are rate-limited (one per interval, reporting how many were suppressed) while counters
     /// count every run, skip, miss and reactivation; no trace event is dropped.
     CountersNeverLost,
-    /// A deactivated component is never stepped by the scheduler again until it is activated.
+    /// A served deactivation shows in the trace at once, and the component is never stepped by the scheduler
+    /// again until the trace shows its activation.
     QuietShutdown,
-    /// A component stepped again after a gap of more than k periods is told so, with the gap; otherwise not.
+    /// A component that comes back more than k periods after the trace last saw it (stepped or deactivated)
+    /// is told so at its next run, with that gap; otherwise not.
     ReactivationSignalled,
     /// Running a transition twice from the same state gives the same state and trace.
     Determinism,

@@ -1,12 +1,13 @@
 //! The transition of the scheduler model: one iteration of the runtime's driver loop (run the decided step with
 //! its cascade, sleep to the decided release, or serve a remote request) driven through the real core, and the
-//! list changes the checker may inject.
+//! list changes the checker may inject. The driver records every call the core accepted and every request it
+//! served, for the audit to find in the trace.
 
 use bica::core::{ComponentCounters, ComponentId, Decision, Gate};
 use bica::trace::Caller;
 
 use super::SchedulerModel;
-use super::audit::Audit;
+use super::audit::{Audit, DriverCall, Request};
 use super::checks::{Check, Fact};
 use super::state::{OverrunIn, SchedulerAction, SchedulerState, ns};
 
@@ -22,79 +23,17 @@ impl SchedulerModel {
         let before: Vec<ComponentCounters> = (0..self.config.registered())
             .map(|i| next.core.counters(ComponentId(i as u32)).unwrap_or_default())
             .collect();
-        let mut audit = Audit { model: self, violated: 0, observed: 0, findings: Vec::new() };
+        let mut audit = Audit::new(self);
         audit.illegal_between_steps(&state.core, state.now_ns);
-        let now = self.serve_request_time(state, action, &mut audit);
-        next.now_ns = now;
+        next.now_ns = self.serve_request_time(state, action, &mut audit);
         match action {
-            SchedulerAction::Activate { component, .. } => {
-                next.list_changes += 1;
-                if let Err(error) = next.core.activate(ComponentId(component as u32), now) {
-                    audit.fail(Check::CallsAccepted, format!("activate({}) refused: {error}", self.names[component]));
-                }
-                let limit = self.config.period_ns(component).saturating_mul(self.config.reactivation_gap_periods);
-                let reference = &mut next.reference[component];
-                if !reference.active {
-                    reference.active = true;
-                    if let Some(seen) = reference.last_seen_ns
-                        && now - seen.min(now) > limit
-                    {
-                        reference.pending_gap_ns = Some(now - seen.min(now));
-                    }
-                    reference.next_release_ns = Some(reference.next_release_ns.map_or(now, |r| r.max(now)));
-                }
-            }
+            SchedulerAction::Activate { component, .. } => self.serve_request(&mut next, &mut audit, component, true),
             SchedulerAction::Deactivate { component, .. } => {
-                next.list_changes += 1;
-                audit.observe(Fact::Deactivation);
-                if let Err(error) = next.core.deactivate(ComponentId(component as u32), now) {
-                    audit.fail(Check::CallsAccepted, format!("deactivate({}) refused: {error}", self.names[component]));
-                }
-                let reference = &mut next.reference[component];
-                if reference.active {
-                    reference.active = false;
-                    reference.last_seen_ns = Some(now);
-                }
+                self.serve_request(&mut next, &mut audit, component, false)
             }
-            SchedulerAction::Sleep { until_ns, .. } => {
-                match next.core.next_decision(now) {
-                    Ok(Decision::SleepUntil(wake)) if wake == until_ns => {}
-                    other => audit.fail(
-                        Check::Determinism,
-                        format!("the decision at {} changed from sleep until {} to {other:?}", ns(now), ns(until_ns)),
-                    ),
-                }
-                let due: Vec<usize> = (0..self.config.components.len())
-                    .filter(|&i| {
-                        next.reference[i].active && next.reference[i].next_release_ns.is_some_and(|r| r <= now)
-                    })
-                    .collect();
-                if !due.is_empty() {
-                    let names: Vec<&str> = due.iter().map(|&i| self.names[i].as_str()).collect();
-                    audit.fail(
-                        Check::LatenessBound,
-                        format!("the scheduler sleeps at {} while {names:?} are due", ns(now)),
-                    );
-                }
-                let earliest = (0..self.config.components.len())
-                    .filter(|&i| next.reference[i].active)
-                    .filter_map(|i| next.reference[i].next_release_ns)
-                    .min();
-                if earliest.is_some_and(|earliest| earliest < until_ns) {
-                    audit.fail(
-                        Check::LatenessBound,
-                        format!(
-                            "the scheduler sleeps until {} past a release at {}",
-                            ns(until_ns),
-                            ns(earliest.unwrap_or(0))
-                        ),
-                    );
-                }
-                next.now_ns = until_ns.max(now);
-            }
+            SchedulerAction::Sleep { until_ns, .. } => self.sleep(&mut next, &mut audit, until_ns),
             SchedulerAction::Step { component, overrun, .. } => {
-                let end = self.run_step(&mut next, &mut audit, component, overrun)?;
-                next.now_ns = end;
+                next.now_ns = self.run_step(&mut next, &mut audit, component, overrun)?;
             }
         }
         let events = next.core.drain_trace();
@@ -105,6 +44,57 @@ impl SchedulerModel {
         next.findings = audit.findings;
         next.last_events = events;
         Some(next)
+    }
+
+    /// Serves a remote activation (or deactivation) request of top-level `component` at the current time; the
+    /// audit then looks for its effect in the trace.
+    fn serve_request(&self, next: &mut SchedulerState, audit: &mut Audit<'_>, component: usize, activate: bool) {
+        next.list_changes += 1;
+        let id = ComponentId(component as u32);
+        let now = next.now_ns;
+        let (call, result) = if activate {
+            ("activate", next.core.activate(id, now))
+        } else {
+            audit.observe(Fact::Deactivation);
+            ("deactivate", next.core.deactivate(id, now))
+        };
+        match result {
+            Ok(()) => audit.request = Some(Request { component: id, activate, at_ns: now }),
+            Err(error) => {
+                audit.fail(Check::CallsAccepted, format!("{call}({}) refused: {error}", self.names[component]))
+            }
+        }
+    }
+
+    /// The driver sleeps until `until_ns`: the core must still decide so, and (by the trace's grids) no active
+    /// component may be due now or have a release before the wake-up.
+    fn sleep(&self, next: &mut SchedulerState, audit: &mut Audit<'_>, until_ns: u64) {
+        let now = next.now_ns;
+        match next.core.next_decision(now) {
+            Ok(Decision::SleepUntil(wake)) if wake == until_ns => {}
+            other => audit.fail(
+                Check::Determinism,
+                format!("the decision at {} changed from sleep until {} to {other:?}", ns(now), ns(until_ns)),
+            ),
+        }
+        let pending: Vec<(usize, u64)> = (0..self.config.components.len())
+            .filter(|&i| next.seen[i].active)
+            .filter_map(|i| next.seen[i].pending_ns(self.config.period_ns(i)).map(|release| (i, release)))
+            .collect();
+        let due: Vec<&str> =
+            pending.iter().filter(|&&(_, release)| release <= now).map(|&(i, _)| self.names[i].as_str()).collect();
+        if !due.is_empty() {
+            audit.fail(Check::LatenessBound, format!("the scheduler sleeps at {} while {due:?} are due", ns(now)));
+        }
+        if let Some(earliest) = pending.iter().map(|&(_, release)| release).min()
+            && earliest < until_ns
+        {
+            audit.fail(
+                Check::LatenessBound,
+                format!("the scheduler sleeps until {} past a release at {}", ns(until_ns), ns(earliest)),
+            );
+        }
+        next.now_ns = until_ns.max(now);
     }
 
     /// The time an action happens: now, or, for a remote request that arrives while the driver sleeps, the
@@ -138,7 +128,11 @@ impl SchedulerModel {
                 return Some(now);
             }
         }
-        match next.core.begin_step(id, now, Caller::TopLevel) {
+        let begun = next.core.begin_step(id, now, Caller::TopLevel);
+        if begun.is_ok() {
+            audit.calls.push(DriverCall::Begin { component: id, caller: Caller::TopLevel, at_ns: now });
+        }
+        match begun {
             Ok(Gate::Run(_)) => audit.illegal_during_step(&next.core, id, now),
             Ok(Gate::NotDue { next_release_ns }) => {
                 audit.fail(
@@ -159,7 +153,12 @@ impl SchedulerModel {
         let mut time = now;
         if spec.calls_dependency {
             let dependency = self.config.dependency_id();
-            match next.core.begin_step(dependency, time, Caller::Nested { parent: id }) {
+            let caller = Caller::Nested { parent: id };
+            let begun = next.core.begin_step(dependency, time, caller);
+            if begun.is_ok() {
+                audit.calls.push(DriverCall::Begin { component: dependency, caller, at_ns: time });
+            }
+            match begun {
                 Ok(Gate::Run(_)) => {
                     let duration = if overrun == Some(OverrunIn::Dependency) {
                         self.overran(next, time, self.config.dependency.nominal_ns)
@@ -167,8 +166,11 @@ impl SchedulerModel {
                         self.config.dependency.nominal_ns
                     };
                     time += duration;
-                    if let Err(error) = next.core.finish_step(dependency, time) {
-                        audit.fail(Check::CallsAccepted, format!("finish_step(dependency) refused: {error}"));
+                    match next.core.finish_step(dependency, time) {
+                        Ok(()) => audit.calls.push(DriverCall::Finish { component: dependency, at_ns: time }),
+                        Err(error) => {
+                            audit.fail(Check::CallsAccepted, format!("finish_step(dependency) refused: {error}"))
+                        }
                     }
                 }
                 Ok(Gate::NotDue { .. }) if overrun == Some(OverrunIn::Dependency) => return None,
@@ -179,8 +181,11 @@ impl SchedulerModel {
         let duration =
             if overrun == Some(OverrunIn::Own) { self.overran(next, time, spec.nominal_ns) } else { spec.nominal_ns };
         time += duration;
-        if let Err(error) = next.core.finish_step(id, time) {
-            audit.fail(Check::CallsAccepted, format!("finish_step({name}) at {} refused: {error}", ns(time)));
+        match next.core.finish_step(id, time) {
+            Ok(()) => audit.calls.push(DriverCall::Finish { component: id, at_ns: time }),
+            Err(error) => {
+                audit.fail(Check::CallsAccepted, format!("finish_step({name}) at {} refused: {error}", ns(time)))
+            }
         }
         Some(time)
     }
@@ -198,8 +203,8 @@ impl SchedulerModel {
         if state.list_changes >= self.config.max_list_changes {
             return;
         }
-        for (component, reference) in state.reference.iter().enumerate().take(self.config.components.len()) {
-            actions.push(if reference.active {
+        for (component, seen) in state.seen.iter().enumerate().take(self.config.components.len()) {
+            actions.push(if seen.active {
                 SchedulerAction::Deactivate { at_ns, component }
             } else {
                 SchedulerAction::Activate { at_ns, component }

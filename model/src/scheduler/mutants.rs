@@ -7,7 +7,6 @@ use super::checks::Check;
 use super::config::SchedulerModelConfig;
 
 /// One planted scheduler bug: its name, a configuration with it planted, and the property expected to catch it.
-
 #[derive(Clone, Debug)]
 pub struct SchedulerMutantCase {
     /// The mutant's name.
@@ -19,7 +18,6 @@ pub struct SchedulerMutantCase {
 }
 
 /// The five scheduler mutants of `bica`, each planted in the default configuration.
-
 pub fn scheduler_mutants() -> Vec<SchedulerMutantCase> {
     let case = |name, mutant, check: Check| SchedulerMutantCase {
         name,

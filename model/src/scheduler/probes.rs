@@ -3,13 +3,14 @@
 
 use bica::BicaError;
 use bica::core::{ComponentId, Decision, SchedulerCore};
-use bica::trace::Caller;
+use bica::trace::{Caller, TraceEvent};
 
 use super::audit::Audit;
 use super::checks::{Check, Fact};
 
 impl Audit<'_> {
-    /// Tries an illegal driver call on a copy of `core`: it must be refused, and the copy left as it was.
+    /// Tries an illegal driver call on a copy of `core`: it must be refused, record nothing in the copy's trace,
+    /// and leave the copy as it was (the last is the one check not over the trace: a refusal leaves no trace).
     fn try_illegal(
         &mut self,
         core: &SchedulerCore,
@@ -17,9 +18,13 @@ impl Audit<'_> {
         call: impl FnOnce(&mut SchedulerCore) -> Result<(), BicaError>,
     ) {
         let mut probe = core.clone();
-        let verdict = match call(&mut probe) {
-            Ok(()) => "accepted",
-            Err(_) if probe != *core => "refused, but it changed the core",
+        let result = call(&mut probe);
+        let traced: Vec<TraceEvent> = probe.trace().events().skip(core.trace().events().len()).copied().collect();
+        let verdict = match result {
+            Ok(()) if traced.is_empty() => "accepted".to_owned(),
+            Ok(()) => format!("accepted, and the trace records {traced:?}"),
+            Err(_) if !traced.is_empty() => format!("refused, but the trace records {traced:?}"),
+            Err(_) if probe != *core => "refused, but it changed the core".to_owned(),
             Err(_) => return,
         };
         self.fail(Check::IllegalCallsRefused, format!("{what}: {verdict}"));

@@ -10,6 +10,7 @@ use bica::core::{ComponentId, SchedulerCore};
 use bica::trace::{Caller, TraceEvent};
 
 use super::checks::{Check, Fact};
+use super::summary::Seen;
 
 /// Which run of a step overruns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -55,30 +56,15 @@ pub enum SchedulerAction {
     },
 }
 
-/// What the reference keeps for one registered component; each field mirrors what the correct core keeps.
-#[derive(Clone, Debug, PartialEq, Eq, Hash, Default)]
-pub(super) struct Reference {
-    /// Oldest release not yet served or dropped.
-    pub(super) next_release_ns: Option<u64>,
-    /// Last time it was stepped (run or gated skip) or deactivated.
-    pub(super) last_seen_ns: Option<u64>,
-    /// Gap to report on its next run.
-    pub(super) pending_gap_ns: Option<u64>,
-    /// In the active list (top-level components only).
-    pub(super) active: bool,
-    /// Last miss warning.
-    pub(super) last_warning_ns: Option<u64>,
-    /// Misses not warned about since the last warning.
-    pub(super) suppressed: u64,
-}
-
-/// A state of the model: the real scheduler core, the virtual time, the reference, the budgets, and the
+/// A state of the model: the real scheduler core, the virtual time, the trace's summary of each component, the
+/// budgets, and the
 /// verdicts of the transition that led here.
 #[derive(Clone)]
 pub struct SchedulerState {
     pub(super) core: SchedulerCore,
     pub(super) now_ns: u64,
-    pub(super) reference: Vec<Reference>,
+    /// What the trace has shown of each registered component (indexed by component id).
+    pub(super) seen: Vec<Seen>,
     pub(super) overruns: u8,
     pub(super) overrun_excess_ns: u64,
     pub(super) overload_end_ns: Option<u64>,
@@ -126,7 +112,7 @@ impl SchedulerState {
         (
             &self.core,
             self.now_ns,
-            self.reference.as_slice(),
+            self.seen.as_slice(),
             (self.overruns, self.overrun_excess_ns, self.overload_end_ns, self.list_changes),
             (self.violated, self.observed),
         )
@@ -134,7 +120,7 @@ impl SchedulerState {
 }
 
 /// The fields that make a state's identity (everything but the display-only ones).
-type Identity<'a> = (&'a SchedulerCore, u64, &'a [Reference], (u8, u64, Option<u64>, u8), (u16, u16));
+type Identity<'a> = (&'a SchedulerCore, u64, &'a [Seen], (u8, u64, Option<u64>, u8), (u16, u16));
 
 impl PartialEq for SchedulerState {
     fn eq(&self, other: &Self) -> bool {
@@ -205,20 +191,23 @@ impl fmt::Debug for SchedulerState {
             self.list_changes
         )?;
         writeln!(f, "active list {:?}, rounds {}", self.core.active(), self.core.rounds())?;
-        for (index, reference) in self.reference.iter().enumerate() {
-            let counters = self.core.counters(ComponentId(index as u32)).unwrap_or_default();
+        for (index, seen) in self.seen.iter().enumerate() {
+            let id = ComponentId(index as u32);
+            let counters = self.core.counters(id).unwrap_or_default();
+            // The period comes from the core's registration, for display only.
+            let pending = self.core.period_ns(id).ok().and_then(|period| seen.pending_ns(period));
             writeln!(
                 f,
-                "{}: next release {}, runs {}, gated {}, skipped {}, misses {}, warnings {}, reactivations {}{}",
+                "{}: pending release (per trace) {}, runs {}, gated {}, skipped {}, misses {}, warnings {}, reactivations {}{}",
                 self.names.get(index).map_or("?", String::as_str),
-                reference.next_release_ns.map_or("-".to_owned(), ns),
+                pending.map_or("-".to_owned(), ns),
                 counters.runs,
                 counters.gated_skips,
                 counters.skipped_releases,
                 counters.misses,
                 counters.warnings,
                 counters.reactivations,
-                if reference.active { "" } else { " (inactive)" }
+                if seen.active { "" } else { " (inactive)" }
             )?;
         }
         writeln!(f, "trace of the last transition:")?;
