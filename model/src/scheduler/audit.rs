@@ -290,17 +290,19 @@ impl Audit<'_> {
         let skipped = grid.points_between(pending, run.at_ns, period);
         let on_grid = grid.contains(run.release_ns, period);
         if run.release_ns != pending || !on_grid || run.lateness_ns != lateness || run.skipped_periods != skipped {
+            let expected = if run.at_ns < pending {
+                format!("no release is pending before {}", ns(pending))
+            } else {
+                format!("release {}, lateness {}, {skipped} grid points passed unrun", ns(pending), ns(lateness))
+            };
             self.fail(
                 Check::SkippedReleasesCounted,
                 format!(
-                    "{name} at {}: reports release {}, lateness {}, skipped {}; the trace's grid says release {}, \
-                     lateness {}, {skipped} grid points passed unrun",
+                    "{name} at {}: reports release {}, lateness {}, skipped {}; the trace's grid says {expected}",
                     ns(run.at_ns),
                     ns(run.release_ns),
                     ns(run.lateness_ns),
                     run.skipped_periods,
-                    ns(pending),
-                    ns(lateness)
                 ),
             );
         }
