@@ -57,6 +57,7 @@ pub mod core;
 pub mod envelope;
 pub mod life;
 pub mod mutants;
+pub mod rtps;
 pub mod status;
 
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline, StatusLine};
