@@ -167,23 +167,7 @@ impl ValueEnum for RoleArg {
     }
 
     fn to_possible_value(&self) -> Option<PossibleValue> {
-        let help = match self.0 {
-            Role::CameraDetector => {
-                "Camera reader, colour labeller (\"bright\" class) and blob detector: `blob` nodes under the camera node"
-            }
-            Role::LaserDetector => "Laser reader and obstacle detector: `obstacle` nodes under the laser node",
-            Role::Attention => {
-                "The search/track behaviour over attention, head and scanner, with blobs of class 0 as stimuli"
-            }
-            Role::FixtureCamera => {
-                "Writes the bundled EuRoC frames into the camera node (inserted if missing), each frame 5 times in a row"
-            }
-            Role::Bridge => {
-                "Replays a robot log (`--log`: MCAP, ROS 1 bag or rosbag2 directory) into the graph through the replay \
-                 bridge: a node per topic, TF as RT edges"
-            }
-        };
-        Some(PossibleValue::new(self.0.name()).help(help))
+        Some(PossibleValue::new(self.0.name()).help(self.0.summary()))
     }
 }
 
