@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use agent::rtps::AgentTransport;
-use agent::{Agent, AgentConfig, AgentId};
+use agent::{Agent, AgentConfig, AgentId, Control};
 use anyhow::{Context, Result, anyhow, bail};
 use bica::clock::ns_from_ms;
 use bica::prelude::*;
@@ -285,14 +285,17 @@ fn start_work(args: &AgentArgs, agent: &Arc<Agent<AgentTransport>>, stop: &Arc<A
     Ok(Work { driver: Some(driver), player: None })
 }
 
-/// Reads `--control-stdin` commands on a thread: `quiesce` sets `quiesce`; the end of input sets `stop`.
+/// Reads `--control-stdin` commands ([`Control`]) on a thread: `quiesce` sets `quiesce`; the end of input sets
+/// `stop`.
 fn read_control(stop: Arc<AtomicBool>, quiesce: Arc<AtomicBool>) {
     std::thread::spawn(move || {
         for line in std::io::stdin().lines() {
             match line.as_deref().map(str::trim) {
-                Ok("quiesce") => quiesce.store(true, Ordering::SeqCst),
                 Ok("") => {}
-                Ok(other) => eprintln!("agent: unknown command on standard input: {other:?} (quiesce)"),
+                Ok(text) => match Control::parse(text) {
+                    Some(Control::Quiesce) => quiesce.store(true, Ordering::SeqCst),
+                    None => eprintln!("agent: unknown command on standard input: {text:?} (quiesce)"),
+                },
                 Err(_) => break,
             }
         }

@@ -11,7 +11,7 @@
 //! the bridge asks every role for its BICA statistics (`runtime.components`, a remote call over the same DDS
 //! engine): frequency achieved, misses, skipped releases, lateness. Closing the processes' standard input stops
 //! them. The processes are separate on purpose (each its own DDS participant and scheduler); they speak typed
-//! lines both ways ([`agent::StatusLine`] out, [`Control`] in).
+//! lines both ways ([`agent::StatusLine`] out, [`agent::Control`] in).
 
 mod processes;
 mod statistics;
@@ -25,7 +25,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use agent::rtps::AgentTransport;
-use agent::{Agent, AgentConfig, AgentId, StatusLine};
+use agent::{Agent, AgentConfig, AgentId, Control, StatusLine};
 use anyhow::{Context as _, bail};
 use perception::roles::Role;
 use transport::fault::FaultConfig;
@@ -37,7 +37,6 @@ use crate::results::{AgentRow, ComponentRow, RolesResult};
 use crate::units::ms_from_duration;
 use processes::{AgentProcess, Launch};
 
-pub use processes::Control;
 pub use statistics::{STATISTICS_ATTEMPTS, role_statistics};
 
 /// A BICA role for one agent process, with the node it works on: `camera-detector`, `laser-detector:scan`, ...

@@ -1,6 +1,6 @@
 //! The agent processes of an RTPS replay: `cortex agent --control-stdin --json-status` children, whose typed
 //! status lines ([`agent::StatusLine`]) arrive on one channel and which take typed commands on standard input
-//! ([`Control`]); closing their standard input stops them.
+//! ([`agent::Control`]); closing their standard input stops them.
 
 use std::collections::BTreeMap;
 use std::io::{BufRead as _, BufReader, Write as _};
@@ -9,26 +9,10 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use agent::StatusLine;
+use agent::{Control, StatusLine};
 use anyhow::Context as _;
 
 use super::RoleSpec;
-
-/// A command to an agent process, one line on its standard input (`cortex agent --control-stdin`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Control {
-    /// Stop the role's runtime; the agent keeps replicating, so its graph can settle.
-    Quiesce,
-}
-
-impl Control {
-    /// The line `cortex agent --control-stdin` reads.
-    pub fn line(self) -> &'static str {
-        match self {
-            Control::Quiesce => "quiesce",
-        }
-    }
-}
 
 /// How an agent process is started.
 pub(super) struct Launch<'a> {
