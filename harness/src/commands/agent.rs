@@ -15,23 +15,26 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use agent::{Agent, AgentConfig, AgentId};
+use agent::rtps::AgentTransport;
+use agent::{Agent, AgentConfig, AgentId, Control};
 use anyhow::{Context, Result, anyhow, bail};
 use bica::clock::ns_from_ms;
 use bica::prelude::*;
 use bica::service::{Service, ServiceBuilder};
+use clap::builder::PossibleValue;
 use clap::{Args, ValueEnum};
 use dsr::{NewNode, NodeId, attrs};
+use measure::bridge_agent::play_log;
 use perception::agent_graph::share_agent;
 use perception::attention::{Scanner, StimulusKind};
 use perception::blobs::{BlobConfig, BlobDetector};
 use perception::graph::SharedGraph;
 use perception::labelling::{ColourClass, LabelConfig, LabelTables};
 use perception::obstacles::{LaserObstacleDetector, ObstacleConfig};
+use perception::roles::Role;
 use perception::sensors::{CameraReader, Image, LaserReader, write_image};
-use transport::SystemClock;
-use transport::fault::{FaultConfig, FaultPlan};
-use transport::rtps::{RtpsConfig, RtpsTransport, UpdateDelivery};
+use transport::fault::FaultConfig;
+use transport::rtps::{RtpsConfig, UpdateDelivery};
 
 /// Arguments of `cortex agent`.
 #[derive(Debug, Args)]
@@ -68,7 +71,7 @@ pub struct AgentArgs {
     pub run_for_ms: Option<u64>,
     /// Run this BICA role on the agent's graph and serve its runtime's methods to other agents.
     #[arg(long, value_enum)]
-    pub role: Option<Role>,
+    pub role: Option<RoleArg>,
     /// The log the `bridge` role replays.
     #[arg(long, required_if_eq("role", "bridge"))]
     pub log: Option<PathBuf>,
@@ -147,29 +150,31 @@ impl UpdatesArg {
     }
 }
 
-/// The BICA roles an agent process can run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Role {
-    /// Camera reader, colour labeller ("bright" class) and blob detector: `blob` nodes under the camera node.
-    CameraDetector,
-    /// Laser reader and obstacle detector: `obstacle` nodes under the laser node.
-    LaserDetector,
-    /// The search/track behaviour over attention, head and scanner, with blobs of class 0 as stimuli.
-    Attention,
-    /// Writes the bundled EuRoC frames into the camera node (inserted if missing), each frame 5 times in a row.
-    FixtureCamera,
-    /// Replays a robot log (`--log`: MCAP, ROS 1 bag or rosbag2 directory) into the graph through the replay bridge:
-    /// a node per topic, TF as RT edges.
-    Bridge,
+/// `--role`: one of the roles an agent process can run ([`Role`]), by its name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RoleArg(pub Role);
+
+impl ValueEnum for RoleArg {
+    fn value_variants<'a>() -> &'a [Self] {
+        const ALL: [RoleArg; 5] = [
+            RoleArg(Role::ALL[0]),
+            RoleArg(Role::ALL[1]),
+            RoleArg(Role::ALL[2]),
+            RoleArg(Role::ALL[3]),
+            RoleArg(Role::ALL[4]),
+        ];
+        &ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        Some(PossibleValue::new(self.0.name()).help(self.0.summary()))
+    }
 }
 
-/// The transport of an agent process: RTPS, possibly behind the seeded fault injector.
-pub type AgentTransport = Arc<dyn transport::Transport>;
-
-/// Starts an agent on RTPS with the real clock: the way `cortex agent` and `cortex inspect` join a graph. With
-/// `faults`, what the agent receives goes through the seeded fault injector (seeded with the agent id), so loss,
-/// duplication, reordering and delay hit a real agent with its anti-entropy. `life_file` is where each life records
-/// its incarnation ([`AgentConfig::life_file`]).
+/// Starts an agent on RTPS with the real clock ([`agent::rtps::start`]): the way `cortex agent` and `cortex
+/// inspect` join a graph, from `seed_json` if no running agent answers within `join_wait_ms`. With `faults`, what
+/// the agent receives goes through the seeded fault injector (seeded with the agent id). `life_file` is where each
+/// life records its incarnation ([`AgentConfig::life_file`]).
 ///
 /// # Errors
 /// An unreadable or invalid seed graph, or a DDS domain that cannot be joined.
@@ -196,28 +201,7 @@ pub fn start_rtps_agent(
         }
         config.seed = Some(reading.graph);
     }
-    start_rtps_agent_with(config, rtps, faults)
-}
-
-/// Starts an agent of `config` on RTPS with the real clock ([`start_rtps_agent`] for the usual settings).
-///
-/// # Errors
-/// The DDS domain cannot be joined.
-pub fn start_rtps_agent_with(
-    config: AgentConfig,
-    rtps: RtpsConfig,
-    faults: Option<FaultConfig>,
-) -> Result<Arc<Agent<AgentTransport>>> {
-    let id = config.id.0;
-    let rtps = RtpsTransport::new(rtps).context("joining the DDS domain")?;
-    let transport: AgentTransport = match faults {
-        Some(faults) => {
-            let plan = FaultPlan::new(u64::from(id), faults);
-            Arc::new(plan.wrap(rtps, Arc::new(SystemClock) as Arc<dyn transport::Clock>))
-        }
-        None => Arc::new(rtps),
-    };
-    Ok(Arc::new(Agent::start(config, transport, Arc::new(SystemClock))?))
+    agent::rtps::start(config, rtps, faults).context("joining the DDS domain")
 }
 
 /// Runs `cortex agent`.
@@ -236,97 +220,18 @@ pub fn run(args: AgentArgs) -> Result<()> {
         life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id),
     )?;
     let stop = Arc::new(AtomicBool::new(false));
-    let mut player = None;
-    let driver = match args.role {
-        Some(Role::Bridge) => {
-            if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {
-                bail!("agent {} got no graph in time to start the bridge", args.id);
-            }
-            let path = args
-                .log
-                .clone()
-                .context("the bridge role needs --log LOG (an MCAP file, a ROS 1 bag or a rosbag2 directory)")?;
-            let log = replay::Log::open(&path, replay::ReadOptions::default())
-                .with_context(|| format!("cannot replay {}", path.display()))?;
-            let (agent, stop, rate, loops) = (Arc::clone(&agent), Arc::clone(&stop), args.rate, args.loops);
-            player = Some(std::thread::spawn(move || {
-                play_log(&agent, &log, replay::BridgeOptions::default(), rate, loops, &stop, &mut |_| Ok(()))
-                    .map(|p| p.bridge)
-            }));
-            None
-        }
-        Some(role) => {
-            if !agent.wait_ready(Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10)) {
-                bail!("agent {} got no graph in time to start role {role:?}", args.id);
-            }
-            let (driver, service) = start_role(role, &agent, &args.sensor, args.period_ms)?;
-            agent.serve_calls(Arc::new(service));
-            Some(driver)
-        }
-        None => None,
-    };
-
+    let work = start_work(&args, &agent, &stop)?;
     {
         let stop = Arc::clone(&stop);
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
     }
     let quiesce = Arc::new(AtomicBool::new(false));
     if args.control_stdin {
-        let (stop, quiesce) = (Arc::clone(&stop), Arc::clone(&quiesce));
-        std::thread::spawn(move || {
-            for line in std::io::stdin().lines() {
-                match line.as_deref().map(str::trim) {
-                    Ok("quiesce") => quiesce.store(true, Ordering::SeqCst),
-                    Ok("") => {}
-                    Ok(other) => eprintln!("agent: unknown command on standard input: {other:?} (quiesce)"),
-                    Err(_) => break,
-                }
-            }
-            stop.store(true, Ordering::SeqCst);
-        });
+        read_control(Arc::clone(&stop), Arc::clone(&quiesce));
     }
-    let mut driver = driver;
     let started = Instant::now();
-    let deadline = args.run_for_ms.map(|ms| started + Duration::from_millis(ms));
-    let mut written = false;
-    let mut next_status = Instant::now();
-    while !stop.load(Ordering::SeqCst) && deadline.is_none_or(|d| Instant::now() < d) {
-        if !written && agent.is_ready() {
-            written = true;
-            for i in 0..args.insert_nodes {
-                let name = format!("a{}_{i}", args.id);
-                let node = NewNode::new("object", &name).with_attr("pos_x", i as f32);
-                let id = agent.insert_node(node).with_context(|| format!("inserting {name}"))?;
-                agent.set_attr(id, attrs::POS_Y, args.id as f32)?;
-            }
-        }
-        if quiesce.load(Ordering::SeqCst)
-            && let Some(driver) = driver.take()
-        {
-            agent.stop_serving_calls();
-            driver.stop().context("stopping the role's runtime")?;
-        }
-        if args.json_status && Instant::now() >= next_status {
-            next_status = Instant::now() + Duration::from_millis(args.status_ms);
-            println!("{}", status_json(&agent, started));
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    if let Some(driver) = driver {
-        agent.stop_serving_calls();
-        driver.stop().context("stopping the role's runtime")?;
-    }
-    if let Some(player) = player {
-        stop.store(true, Ordering::SeqCst);
-        let stats = player.join().map_err(|_| anyhow!("the bridge thread panicked"))??;
-        eprintln!(
-            "bridge: {} messages bridged, {} unknown, {} filtered, {} errors",
-            stats.messages,
-            stats.unknown.values().sum::<u64>(),
-            stats.filtered,
-            stats.error_count()
-        );
-    }
+    let work = serve(&args, &agent, work, &stop, &quiesce, started)?;
+    stop_work(&agent, work, &stop)?;
     agent.shutdown();
     if args.json_status {
         println!("{}", status_json(&agent, started));
@@ -341,60 +246,124 @@ pub fn run(args: AgentArgs) -> Result<()> {
     Ok(())
 }
 
+/// What an agent process runs besides its agent: a role's BICA runtime, or the bridge's log player.
+#[derive(Default)]
+struct Work {
+    /// The role's runtime, until it is quiesced.
+    driver: Option<Driver>,
+    /// The bridge role's player thread.
+    player: Option<std::thread::JoinHandle<Result<replay::BridgeStats>>>,
+}
+
+/// Starts `--role`'s work once the agent has its graph: the bridge plays `--log` on a thread (until it ends or
+/// `stop` is set); any other role runs its BICA tree, whose methods the agent serves to other agents.
+fn start_work(args: &AgentArgs, agent: &Arc<Agent<AgentTransport>>, stop: &Arc<AtomicBool>) -> Result<Work> {
+    let Some(RoleArg(role)) = args.role else { return Ok(Work::default()) };
+    let join_wait = Duration::from_millis(args.join_wait_ms) + Duration::from_secs(10);
+    if role == Role::Bridge {
+        if !agent.wait_ready(join_wait) {
+            bail!("agent {} got no graph in time to start the bridge", args.id);
+        }
+        let path = args
+            .log
+            .clone()
+            .context("the bridge role needs --log LOG (an MCAP file, a ROS 1 bag or a rosbag2 directory)")?;
+        let log = replay::Log::open(&path, replay::ReadOptions::default())
+            .with_context(|| format!("cannot replay {}", path.display()))?;
+        let (agent, stop, rate, loops) = (Arc::clone(agent), Arc::clone(stop), args.rate, args.loops);
+        let player = std::thread::spawn(move || {
+            let options = replay::BridgeOptions::default();
+            play_log(&agent, &log, options, rate, loops, &stop, &mut |_| Ok(())).map(|p| p.bridge)
+        });
+        return Ok(Work { driver: None, player: Some(player) });
+    }
+    if !agent.wait_ready(join_wait) {
+        bail!("agent {} got no graph in time to start role {role:?}", args.id);
+    }
+    let (driver, service) = start_role(role, agent, &args.sensor, args.period_ms)?;
+    agent.serve_calls(Arc::new(service));
+    Ok(Work { driver: Some(driver), player: None })
+}
+
+/// Reads `--control-stdin` commands ([`Control`]) on a thread: `quiesce` sets `quiesce`; the end of input sets
+/// `stop`.
+fn read_control(stop: Arc<AtomicBool>, quiesce: Arc<AtomicBool>) {
+    std::thread::spawn(move || {
+        for line in std::io::stdin().lines() {
+            match line.as_deref().map(str::trim) {
+                Ok("") => {}
+                Ok(text) => match Control::parse(text) {
+                    Some(Control::Quiesce) => quiesce.store(true, Ordering::SeqCst),
+                    None => eprintln!("agent: unknown command on standard input: {text:?} (quiesce)"),
+                },
+                Err(_) => break,
+            }
+        }
+        stop.store(true, Ordering::SeqCst);
+    });
+}
+
+/// Runs until `stop` is set or `--run-for-ms` has passed: inserts `--insert-nodes` nodes once ready, stops the
+/// role's runtime when quiesced, prints status lines.
+fn serve(
+    args: &AgentArgs,
+    agent: &Agent<AgentTransport>,
+    mut work: Work,
+    stop: &AtomicBool,
+    quiesce: &AtomicBool,
+    started: Instant,
+) -> Result<Work> {
+    let deadline = args.run_for_ms.map(|ms| started + Duration::from_millis(ms));
+    let mut written = false;
+    let mut next_status = Instant::now();
+    while !stop.load(Ordering::SeqCst) && deadline.is_none_or(|d| Instant::now() < d) {
+        if !written && agent.is_ready() {
+            written = true;
+            for i in 0..args.insert_nodes {
+                let name = format!("a{}_{i}", args.id);
+                let node = NewNode::new("object", &name).with_attr("pos_x", i as f32);
+                let id = agent.insert_node(node).with_context(|| format!("inserting {name}"))?;
+                agent.set_attr(id, attrs::POS_Y, args.id as f32)?;
+            }
+        }
+        if quiesce.load(Ordering::SeqCst)
+            && let Some(driver) = work.driver.take()
+        {
+            agent.stop_serving_calls();
+            driver.stop().context("stopping the role's runtime")?;
+        }
+        if args.json_status && Instant::now() >= next_status {
+            next_status = Instant::now() + Duration::from_millis(args.status_ms);
+            println!("{}", status_json(agent, started));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok(work)
+}
+
+/// Stops what still runs: the role's runtime, or the bridge's player (its counters on standard error).
+fn stop_work(agent: &Agent<AgentTransport>, work: Work, stop: &AtomicBool) -> Result<()> {
+    if let Some(driver) = work.driver {
+        agent.stop_serving_calls();
+        driver.stop().context("stopping the role's runtime")?;
+    }
+    if let Some(player) = work.player {
+        stop.store(true, Ordering::SeqCst);
+        let stats = player.join().map_err(|_| anyhow!("the bridge thread panicked"))??;
+        eprintln!(
+            "bridge: {} messages bridged, {} unknown, {} filtered, {} errors",
+            stats.messages,
+            stats.unknown.values().sum::<u64>(),
+            stats.filtered,
+            stats.error_count()
+        );
+    }
+    Ok(())
+}
+
 fn status_json<T: transport::Transport>(agent: &Agent<T>, started: Instant) -> String {
     let line = agent.status_line(started.elapsed().as_millis() as u64);
     serde_json::to_string(&line).unwrap_or_else(|error| format!("{{\"error\": \"status line: {error}\"}}"))
-}
-
-/// What [`play_log`] played.
-#[derive(Debug, Clone, Default)]
-pub struct Played {
-    /// The bridge's counters.
-    pub bridge: replay::BridgeStats,
-    /// Messages, bytes, deltas (each published by the agent) and loops, as the in-process replay counts them.
-    pub drive: replay::inproc::DriveStats,
-}
-
-/// The `bridge` role: paces `log` on the monotonic clock and writes each message into the agent's graph through
-/// `replay::Bridge` (the agent publishes the deltas), until the log ends or `stop` is set. `on_deltas` sees the
-/// deltas of each message once the agent has published them.
-pub fn play_log(
-    agent: &Agent<AgentTransport>,
-    log: &replay::Log,
-    options: replay::BridgeOptions,
-    rate: replay::Rate,
-    loops: u32,
-    stop: &AtomicBool,
-    on_deltas: &mut dyn FnMut(&[Arc<dsr::Delta>]) -> Result<()>,
-) -> Result<Played> {
-    let mut bridge = replay::Bridge::new(options);
-    let mut played = Played::default();
-    let origin = Instant::now();
-    let clock = move || origin.elapsed().as_nanos() as u64;
-    for item in replay::Pacer::new(&log.messages, rate, loops, clock) {
-        loop {
-            if stop.load(Ordering::SeqCst) {
-                played.bridge = bridge.stats().clone();
-                return Ok(played);
-            }
-            let now = clock();
-            if now >= item.due_ns {
-                break;
-            }
-            std::thread::sleep(Duration::from_nanos(item.due_ns - now).min(Duration::from_millis(50)));
-        }
-        played.drive.messages += 1;
-        played.drive.bytes += item.message.data.len() as u64;
-        played.drive.loops = played.drive.loops.max(item.loop_index + 1);
-        let deltas = agent.update(|replica, now_ns| {
-            let deltas = bridge.ingest(replica, now_ns, item.message, item.shift_ns);
-            (deltas.clone(), deltas)
-        })?;
-        played.drive.deltas += deltas.len() as u64;
-        on_deltas(&deltas)?;
-    }
-    played.bridge = bridge.stats().clone();
-    Ok(played)
 }
 
 /// Starts `role`'s runtime on its own thread, over `agent`'s graph; returns it with its named methods.

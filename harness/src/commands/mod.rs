@@ -11,5 +11,4 @@ pub mod graph;
 pub mod inspect;
 pub mod receiver;
 pub mod replay;
-pub mod replay_rtps;
 pub mod report;

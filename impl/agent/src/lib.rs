@@ -57,11 +57,13 @@ pub mod core;
 pub mod envelope;
 pub mod life;
 pub mod mutants;
+pub mod rtps;
 pub mod status;
 
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline, StatusLine};
 pub use calls::{CallError, CallReplier, CallServer, PendingCall};
 pub use envelope::CallFault;
+pub use status::Control;
 
 /// A CORTEX agent id (12 bits: 0..4096).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]

@@ -132,3 +132,44 @@ pub struct StatusLine {
     /// Times the DDS participants were rebuilt after a failure.
     pub participant_rebuilds: u64,
 }
+
+/// A command to an agent process, one line on its standard input (`cortex agent --control-stdin`): the other
+/// direction of [`StatusLine`], shared by the process that reads it and the ones that write it. The end of input
+/// stops the agent.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// Stop the role's runtime; the agent keeps replicating, so its graph can settle.
+    Quiesce,
+}
+
+impl Control {
+    /// Every command.
+    pub const ALL: [Control; 1] = [Control::Quiesce];
+
+    /// The command's line (without its line end).
+    pub fn line(self) -> &'static str {
+        match self {
+            Control::Quiesce => "quiesce",
+        }
+    }
+
+    /// The command `line` gives, space around it ignored; `None` for an unknown line.
+    pub fn parse(line: &str) -> Option<Control> {
+        Control::ALL.into_iter().find(|control| control.line() == line.trim())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Control;
+
+    #[test]
+    fn every_control_line_parses_back_and_unknown_lines_do_not() {
+        for control in Control::ALL {
+            assert_eq!(Control::parse(control.line()), Some(control));
+            assert_eq!(Control::parse(&format!("  {}\n", control.line())), Some(control));
+        }
+        assert_eq!(Control::parse("stop"), None);
+        assert_eq!(Control::parse(""), None);
+    }
+}

@@ -12,9 +12,10 @@
 //!    [`results::Results`], …), beside the leaf helpers [`units`] (the one place durations and bytes become
 //!    display numbers), [`clock`], [`latency`] and [`provenance`].
 //! 2. **Runners** that produce results: [`run`] (in-process runs, their source side in `source` and receiving
-//!    side in `receiving`, shared with [`process`]: receivers as separate processes), [`partition`], [`roles`],
-//!    [`timeline`], with [`workload`] (the planned writes), [`netns`] and [`usage`] (what the OS says a run cost),
-//!    and [`experiment`], which runs a whole set.
+//!    side in `receiving`, shared with [`process`]: receivers as separate processes), [`partition`],
+//!    [`replay_rtps`] (a log replayed over RTPS into `cortex agent` processes, its bridge agent playing the log
+//!    with [`bridge_agent`]) and [`roles`] over it, [`timeline`], with [`workload`] (the planned writes),
+//!    [`netns`] and [`usage`] (what the OS says a run cost), and [`experiment`], which runs a whole set.
 //! 3. **Consumers** of results: [`report`] (`results.json`, the figures and `report.md`, one file per section),
 //!    [`figures`] and [`lanes`] (SVG and PNG with an embedded font), and [`record`] (runs as MCAP files that
 //!    Foxglove opens).
@@ -22,6 +23,7 @@
 //! Results serialise to JSON with [`SCHEMA_VERSION`]; a change that renames or removes a field bumps it.
 
 pub mod bench;
+pub mod bridge_agent;
 pub mod clock;
 pub mod experiment;
 pub mod figures;
@@ -33,6 +35,7 @@ pub mod process;
 pub mod provenance;
 mod receiving;
 pub mod record;
+pub mod replay_rtps;
 pub mod report;
 pub mod results;
 pub mod roles;

@@ -19,6 +19,73 @@ use crate::labelling::{ColourLabeller, LabelTables};
 use crate::obstacles::{LaserObstacleDetector, ObstacleConfig};
 use crate::sensors::{CameraReader, LaserReader};
 
+/// The roles an agent process can run (`cortex agent --role`): the three BICA trees built here, the fixture camera
+/// (a stand-in for a sensor bridge) and the log-playing bridge, which runs no BICA tree.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Role {
+    /// Camera reader, colour labeller ("bright" class) and blob detector: `blob` nodes under the camera node.
+    CameraDetector,
+    /// Laser reader and obstacle detector: `obstacle` nodes under the laser node.
+    LaserDetector,
+    /// The search/track behaviour over attention, head and scanner, with blobs of class 0 as stimuli.
+    Attention,
+    /// Writes the bundled EuRoC frames into the camera node (inserted if missing), each frame 5 times in a row.
+    FixtureCamera,
+    /// Replays a robot log (MCAP, ROS 1 bag or rosbag2 directory) into the graph through the replay bridge: a node
+    /// per topic, TF as RT edges.
+    Bridge,
+}
+
+impl Role {
+    /// Every role, in the order of their documentation.
+    pub const ALL: [Role; 5] =
+        [Role::CameraDetector, Role::LaserDetector, Role::Attention, Role::FixtureCamera, Role::Bridge];
+
+    /// The role's name on command lines and in reports: `camera-detector`, `laser-detector`, `attention`,
+    /// `fixture-camera`, `bridge`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Role::CameraDetector => "camera-detector",
+            Role::LaserDetector => "laser-detector",
+            Role::Attention => "attention",
+            Role::FixtureCamera => "fixture-camera",
+            Role::Bridge => "bridge",
+        }
+    }
+
+    /// What the role does, in one sentence (`cortex agent --help`).
+    pub fn summary(self) -> &'static str {
+        match self {
+            Role::CameraDetector => {
+                "Camera reader, colour labeller (\"bright\" class) and blob detector: `blob` nodes under the camera node"
+            }
+            Role::LaserDetector => "Laser reader and obstacle detector: `obstacle` nodes under the laser node",
+            Role::Attention => {
+                "The search/track behaviour over attention, head and scanner, with blobs of class 0 as stimuli"
+            }
+            Role::FixtureCamera => {
+                "Writes the bundled EuRoC frames into the camera node (inserted if missing), each frame 5 times in a row"
+            }
+            Role::Bridge => {
+                "Replays a robot log (`--log`: MCAP, ROS 1 bag or rosbag2 directory) into the graph through the replay \
+                 bridge: a node per topic, TF as RT edges"
+            }
+        }
+    }
+}
+
+impl std::str::FromStr for Role {
+    type Err = String;
+
+    /// A role by its [`Role::name`], in any case.
+    fn from_str(text: &str) -> Result<Role, String> {
+        Role::ALL.into_iter().find(|role| role.name().eq_ignore_ascii_case(text)).ok_or_else(|| {
+            let names: Vec<&str> = Role::ALL.iter().map(|role| role.name()).collect();
+            format!("{text:?} is not a role ({})", names.join(", "))
+        })
+    }
+}
+
 /// Why a role could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum RoleError {
@@ -129,4 +196,19 @@ pub fn attention<C: Clock>(
         runtime.activate::<DebugCollector>()
     };
     build(runtime).map_err(|source| RoleError::Bica { role, source })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Role;
+
+    #[test]
+    fn every_role_parses_from_its_name_in_any_case_and_others_are_refused() {
+        for role in Role::ALL {
+            assert_eq!(role.name().parse(), Ok(role));
+            assert_eq!(role.name().to_uppercase().parse(), Ok(role));
+        }
+        let error = "painter".parse::<Role>().unwrap_err();
+        assert!(error.contains("not a role") && error.contains("camera-detector, laser-detector"), "{error}");
+    }
 }

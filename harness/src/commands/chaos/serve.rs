@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use agent::rtps::AgentTransport;
 use agent::{Agent, AgentConfig, AgentId};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -14,7 +15,6 @@ use transport::rtps::RtpsConfig;
 
 use super::protocol::{Command, FinalState, Report, parse_command};
 use super::workload::Workload;
-use crate::commands::agent::{AgentTransport, start_rtps_agent_with};
 
 /// Arguments of `cortex chaos-agent` (started by `cortex chaos`, not by hand).
 #[derive(Debug, Args)]
@@ -70,7 +70,7 @@ pub fn run(args: ChaosAgentArgs) -> Result<()> {
     if let Some(name) = &args.plant {
         config.plant = agent::mutants::Plant::of(Some(protocol_mutant(name)?));
     }
-    let agent = start_rtps_agent_with(config, rtps, None)?;
+    let agent = agent::rtps::start(config, rtps, None).context("joining the DDS domain")?;
     let out = Arc::new(Mutex::new(std::io::stdout()));
     {
         // Prints until the process ends (its output closed, or the process exits after the input ends).
