@@ -13,7 +13,7 @@
 //!    display numbers), [`clock`], [`latency`] and [`provenance`].
 //! 2. **Runners** that produce results: [`run`] (in-process runs, their source side in `source` and receiving
 //!    side in `receiving`, shared with [`process`]: receivers as separate processes), [`partition`], [`roles`],
-//!    [`timeline`], with [`workload`] (the planned writes), [`netns`] and [`usage`] (what the OS says a run cost),
+//!    [`timeline`], [`scaling`] (control traffic against the number of agents, in the seeded simulator), with [`workload`] (the planned writes), [`netns`] and [`usage`] (what the OS says a run cost),
 //!    and [`experiment`], which runs a whole set.
 //! 3. **Consumers** of results: [`report`] (`results.json`, the figures and `report.md`, one file per section),
 //!    [`figures`] and [`lanes`] (SVG and PNG with an embedded font), and [`record`] (runs as MCAP files that
@@ -37,6 +37,7 @@ pub mod report;
 pub mod results;
 pub mod roles;
 pub mod run;
+pub mod scaling;
 mod source;
 pub mod spec;
 pub mod timeline;

@@ -233,6 +233,7 @@ fn results() -> Results {
         partition,
         timeline: Some(timeline()),
         roles: Some(serde_json::from_str::<RolesResult>(ROLES).unwrap()),
+        scaling: None,
         seconds: 12.5,
     }
 }
