@@ -60,6 +60,13 @@ overload_until_ms = 1000
 overload_period_ms = 100
 overload_busy_ms = 120
 window_ms = 250
+[scaling]
+agents = [2, 4]
+writers = 2
+write_rate_hz = 50
+window_ms = 500
+announce_ms = 100
+seed = 3
 "#
     )
 }
@@ -179,6 +186,16 @@ fn tiny_report_has_every_figure_and_section() {
     let components = roles["agents"][1]["components"].as_array();
     assert!(components.is_some_and(|c| c.iter().any(|c| c["runs"].as_u64() > Some(0))), "{roles}");
     assert!(report.contains("## Detector roles over RTPS"));
+
+    // Control traffic against the number of agents: one row per group, every group converged.
+    let scaling = results["scaling"]["rows"].as_array().unwrap();
+    assert_eq!(scaling.iter().map(|row| row["agents"].as_u64().unwrap()).collect::<Vec<_>>(), [2, 4]);
+    assert!(
+        scaling
+            .iter()
+            .all(|row| row["converged"] == true && row["kinds"]["announce"]["samples_sent"].as_u64() > Some(0))
+    );
+    assert!(report.contains("## Control traffic against number of agents"));
 
     // The timeline ran on the real clock, so only what the scheduler guarantees whatever the timing is checked.
     let timeline = &results["timeline"];

@@ -106,6 +106,9 @@ impl AgentsConfig {
             join_wait_ns: if index == 0 { 0 } else { JOIN_WAIT_NS },
             join_retry_ns: RETRY_NS,
             announce_period_ns: ANNOUNCE_NS,
+            // The running agents' default. The model's groups are smaller than it, so every agent announces every
+            // period: a larger group only stretches the periodic announce (`AgentCore::announce_interval_ns`).
+            announce_group: agent::config::DEFAULT_ANNOUNCE_GROUP,
             quiet_announce_ns: ANNOUNCE_NS / 4,
             log_limits: LogLimits { max_deltas: self.history, max_payload_bytes: 1 << 20 },
             max_buffered_deltas: 16,

@@ -23,6 +23,7 @@ use measure::bench::fanout::{FanoutConfig, FanoutResult};
 use measure::bench::rtt::RttConfig;
 use measure::bench::{Counting, fanout, join, rtt};
 use measure::netns::{self, NetnsSetup};
+use measure::spec::ScalingExperiment;
 use transport::rtps::Multicast;
 
 use super::agent::UpdatesArg;
@@ -54,6 +55,37 @@ pub enum BenchCommand {
     /// Helper process: counts the fan-out's samples and reports the count.
     #[command(hide = true)]
     FanoutReader(FanoutReaderArgs),
+    /// Anti-entropy and data traffic against the number of agents, in the seeded simulator (no network).
+    Scaling(ScalingArgs),
+}
+
+/// Arguments of `cortex bench scaling`.
+#[derive(Debug, Args)]
+pub struct ScalingArgs {
+    /// Numbers of agents, one run each.
+    #[arg(long, value_delimiter = ',', default_values_t = [8, 32, 128])]
+    pub agents: Vec<u32>,
+    /// Agents that write.
+    #[arg(long, default_value_t = 4)]
+    pub writers: u32,
+    /// Writes per second, all writers together.
+    #[arg(long, default_value_t = 100.0)]
+    pub rate: f64,
+    /// Measured window, ms of simulated time.
+    #[arg(long, default_value_t = 10_000)]
+    pub window_ms: u64,
+    /// Base announce period, ms.
+    #[arg(long, default_value_t = 500)]
+    pub announce_ms: u64,
+    /// Agents whose announces fit in one period (0: every agent announces every period).
+    #[arg(long, value_delimiter = ',', default_values_t = [agent::config::DEFAULT_ANNOUNCE_GROUP])]
+    pub announce_group: Vec<u32>,
+    /// Seed of the agents' nonces and the written values.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print the result as one JSON object.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Where a measurement runs, and so how its wire bytes are counted.
@@ -234,7 +266,33 @@ pub fn run(args: BenchArgs) -> Result<()> {
         }
         BenchCommand::Fanout(args) => run_fanout(args),
         BenchCommand::FanoutReader(args) => fanout::reader(args.domain, &args.prefix, args.multicast.into()),
+        BenchCommand::Scaling(args) => run_scaling(args),
     }
+}
+
+/// One run per announce group, side by side (`--announce-group 0,8`: without and with the bound).
+fn run_scaling(args: ScalingArgs) -> Result<()> {
+    let mut results = Vec::new();
+    for &announce_group in &args.announce_group {
+        let experiment = ScalingExperiment {
+            agents: args.agents.clone(),
+            writers: args.writers,
+            write_rate_hz: args.rate,
+            window_ms: args.window_ms,
+            announce_ms: args.announce_ms,
+            announce_group,
+            seed: args.seed,
+        };
+        results.push(measure::scaling::run(&experiment, &mut |done| eprintln!("{done}"))?);
+    }
+    if args.json {
+        println!("{}", serde_json::to_string(&results)?);
+    } else {
+        for result in &results {
+            print::scaling(result);
+        }
+    }
+    Ok(())
 }
 
 /// This binary: the benchmarks start it for their helper processes.

@@ -9,6 +9,9 @@ use crate::AgentId;
 use crate::core::ProtocolConfig;
 use crate::mutants::Plant;
 
+/// Default of [`AgentConfig::announce_group`]: groups of up to 8 agents announce every period.
+pub const DEFAULT_ANNOUNCE_GROUP: u32 = 8;
+
 /// Settings of an agent.
 #[derive(Clone, Debug)]
 pub struct AgentConfig {
@@ -26,6 +29,13 @@ pub struct AgentConfig {
     /// burst; a slower one, one per write. Zero turns it off. Checked on the agent's tick, so it fires up to one
     /// tick later.
     pub quiet_announce: Duration,
+    /// How many agents' announces fit in one announce period. An agent that has heard from more agents than this
+    /// announces less often, in proportion (every `announce_period × ⌈agents / announce_group⌉`), so the group
+    /// sends about `announce_group` periodic announces per period whatever its size, and the control traffic each
+    /// agent receives does not grow with the group. Gap requests and the quiet announce, which repair most losses,
+    /// do not depend on it; what waits longer in a larger group is the repair that only a periodic announce starts
+    /// (a partition that heals without a write). 0: every agent announces every period.
+    pub announce_group: u32,
     /// History kept for anti-entropy.
     pub log_limits: LogLimits,
     /// Deltas kept while joining, to apply once the graph arrives (older ones are dropped past it; anti-entropy
@@ -65,6 +75,7 @@ impl AgentConfig {
             join_retry: Duration::from_millis(200),
             announce_period: Duration::from_millis(500),
             quiet_announce: Duration::from_millis(100),
+            announce_group: DEFAULT_ANNOUNCE_GROUP,
             log_limits: LogLimits::default(),
             max_buffered_deltas: 65_536,
             max_batch_bytes: 256 << 10,
@@ -86,6 +97,7 @@ impl AgentConfig {
             join_wait_ns: self.join_wait.as_nanos() as u64,
             join_retry_ns: self.join_retry.as_nanos() as u64,
             announce_period_ns: self.announce_period.as_nanos() as u64,
+            announce_group: self.announce_group,
             quiet_announce_ns: self.quiet_announce.as_nanos() as u64,
             log_limits: self.log_limits,
             max_buffered_deltas: self.max_buffered_deltas,

@@ -258,11 +258,23 @@ impl AgentCore {
             self.next_announce_ns = if self.config.plant.is(ProtocolMutant::AnnounceTimerLost) {
                 u64::MAX
             } else {
-                now_ns + self.config.announce_period_ns
+                now_ns + self.announce_interval_ns()
             };
             self.unannounced_write_ns = None;
         }
         out
+    }
+
+    /// The time between this agent's periodic announces: the announce period, times the number of groups of
+    /// [`ProtocolConfig::announce_group`] agents among this one and the peers heard, so a group of any size sends
+    /// about `announce_group` announces per period.
+    pub fn announce_interval_ns(&self) -> u64 {
+        let group = u64::from(self.config.announce_group);
+        if group == 0 {
+            return self.config.announce_period_ns;
+        }
+        let agents = self.peers.len() as u64 + 1;
+        self.config.announce_period_ns.saturating_mul(agents.div_ceil(group).max(1))
     }
 
     /// Handles a received message at `now_ns`.

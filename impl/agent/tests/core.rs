@@ -162,3 +162,57 @@ fn a_graph_of_another_era_reaches_a_joiner_whose_dictionary_learns_its_names() {
         })
         .unwrap();
 }
+
+/// A life of agent `id` with announce period 100 ms and group `group`, alone and ready at time 0.
+fn announcer(id: u32, group: u32) -> AgentCore {
+    let config = AgentConfig {
+        join_wait: Duration::ZERO,
+        announce_period: Duration::from_millis(100),
+        announce_group: group,
+        ..AgentConfig::new(AgentId(id))
+    };
+    let mut core =
+        AgentCore::new(config.protocol(), LifeSeed { nonce: u64::from(id), recorded_incarnation: None }, None, 0);
+    core.tick(0);
+    core
+}
+
+/// Times of the periodic announces `core` sends from `from_ns` to `until_ns`, ticking at every deadline.
+fn announce_times(core: &mut AgentCore, from_ns: u64, until_ns: u64) -> Vec<u64> {
+    let mut times = Vec::new();
+    let mut now = from_ns;
+    while now <= until_ns {
+        let out = core.tick(now);
+        if out.sends.iter().any(|send| matches!(send.message, Message::Announce { .. })) {
+            times.push(now);
+        }
+        now = core.next_deadline_ns().max(now + 1);
+    }
+    times
+}
+
+#[test]
+fn an_agent_that_hears_more_agents_than_its_group_announces_less_often_in_proportion() {
+    let mut core = announcer(1, 4);
+    assert_eq!(core.announce_interval_ns(), 100_000_000, "alone: the announce period");
+    // Eleven peers are heard (their announces): twelve agents, three groups of four.
+    for peer in 2..=12 {
+        let sends = announcer(peer, 4).tick(1).sends;
+        deliver(&sends, &mut core);
+    }
+    assert_eq!(core.peers().len(), 11);
+    assert_eq!(core.announce_interval_ns(), 300_000_000);
+    let times = announce_times(&mut core, 1_000_000_000, 2_000_000_000);
+    let gaps: Vec<u64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(!gaps.is_empty() && gaps.iter().all(|&gap| gap == 300_000_000), "{times:?}");
+}
+
+#[test]
+fn with_no_announce_group_every_agent_announces_every_period_however_many_it_hears() {
+    let mut core = announcer(1, 0);
+    for peer in 2..=12 {
+        let sends = announcer(peer, 0).tick(1).sends;
+        deliver(&sends, &mut core);
+    }
+    assert_eq!(core.announce_interval_ns(), 100_000_000);
+}

@@ -15,7 +15,7 @@ use crate::provenance::{DatasetChecksum, Provenance};
 use crate::results::{FaultRun, PartitionResult, Results, RunResult};
 use crate::spec::{Link, LogSpec, PartitionConfig, RunConfig};
 use crate::workload::{self, Workload};
-use crate::{partition, roles, run, timeline};
+use crate::{partition, roles, run, scaling, timeline};
 
 pub use crate::spec::{ExperimentFile, ExperimentSet};
 
@@ -79,6 +79,10 @@ pub fn run_set(
         }
         None => None,
     };
+    let scaling = match &set.scaling {
+        Some(experiment) => Some(scaling::run(experiment, progress).context("control traffic against agents")?),
+        None => None,
+    };
     Ok(Results {
         provenance,
         experiment: experiment.to_owned(),
@@ -90,6 +94,7 @@ pub fn run_set(
         partition,
         timeline,
         roles,
+        scaling,
         seconds: started.elapsed().as_secs_f64(),
     })
 }

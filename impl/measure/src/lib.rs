@@ -14,8 +14,9 @@
 //! 2. **Runners** that produce results: [`run`] (in-process runs, their source side in `source` and receiving
 //!    side in `receiving`, shared with [`process`]: receivers as separate processes), [`partition`],
 //!    [`replay_rtps`] (a log replayed over RTPS into `cortex agent` processes, its bridge agent playing the log
-//!    with [`bridge_agent`]) and [`roles`] over it, [`timeline`], with [`workload`] (the planned writes),
-//!    [`netns`] and [`usage`] (what the OS says a run cost), and [`experiment`], which runs a whole set.
+//!    with [`bridge_agent`]) and [`roles`] over it, [`timeline`], [`scaling`] (control traffic against the number
+//!    of agents, in the seeded simulator), with [`workload`] (the planned writes), [`netns`] and [`usage`] (what
+//!    the OS says a run cost), and [`experiment`], which runs a whole set.
 //! 3. **Consumers** of results: [`report`] (`results.json`, the figures and `report.md`, one file per section),
 //!    [`figures`] and [`lanes`] (SVG and PNG with an embedded font), and [`record`] (runs as MCAP files that
 //!    Foxglove opens).
@@ -40,6 +41,7 @@ pub mod report;
 pub mod results;
 pub mod roles;
 pub mod run;
+pub mod scaling;
 mod source;
 pub mod spec;
 pub mod timeline;

@@ -193,6 +193,9 @@ pub struct ExperimentSet {
     /// Detector roles in agent processes during a replay over RTPS ([`crate::roles`]); optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub roles: Option<RolesExperiment>,
+    /// Control traffic against the number of agents in the seeded simulator ([`crate::scaling`]); optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scaling: Option<ScalingExperiment>,
 }
 
 impl ExperimentSet {
@@ -203,7 +206,8 @@ impl ExperimentSet {
             + self.faults.variants.len() * self.faults.transports.len()
             + self.partition.repetitions as usize * self.partition.transports.len()
             + usize::from(self.timeline.is_some())
-            + usize::from(self.roles.is_some())) as u64
+            + usize::from(self.roles.is_some())
+            + self.scaling.as_ref().map_or(0, |s| s.agents.len())) as u64
     }
 }
 
@@ -282,6 +286,65 @@ pub struct RolesExperiment {
     /// Faults injected into what every agent process receives (`cortex replay --faults`), if any.
     #[serde(default)]
     pub faults: Option<String>,
+}
+
+fn default_announce_group() -> u32 {
+    agent::config::DEFAULT_ANNOUNCE_GROUP
+}
+
+/// Most agents in one run of the control-traffic simulation.
+pub const MAX_SCALING_AGENTS: u32 = 1_024;
+/// Longest measured window of the control-traffic simulation, ms of simulated time.
+pub const MAX_SCALING_WINDOW_MS: u64 = 600_000;
+
+/// The `scaling` section of an experiment set: control traffic (announces, missing-requests, repairs) beside the
+/// data traffic, against the number of agents, in the seeded simulator ([`crate::scaling`]).
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScalingExperiment {
+    /// Numbers of agents, one run each.
+    pub agents: Vec<u32>,
+    /// Agents that write (the first ones; fewer if a run has fewer agents).
+    pub writers: u32,
+    /// Writes per second, all writers together (one float attribute each).
+    pub write_rate_hz: f64,
+    /// The measured window, ms of simulated time, after every agent has joined.
+    pub window_ms: u64,
+    /// The agents' base announce period, ms (`AgentConfig::announce_period`).
+    pub announce_ms: u64,
+    /// Agents whose announces fit in one period (`AgentConfig::announce_group`; 0: every agent announces every
+    /// period, as before the group bound).
+    #[serde(default = "default_announce_group")]
+    pub announce_group: u32,
+    /// Seed of the agents' nonces and of the writers' values.
+    pub seed: u64,
+}
+
+impl ScalingExperiment {
+    /// Checks the numbers.
+    ///
+    /// # Errors
+    /// No run, fewer than 2 or more than [`MAX_SCALING_AGENTS`] agents in a run, no writer, a rate that is not
+    /// positive and finite, an empty window or one over [`MAX_SCALING_WINDOW_MS`], a zero announce period.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(!self.agents.is_empty(), "scaling: `agents` lists no run");
+        if let Some(n) = self.agents.iter().find(|&&n| !(2..=MAX_SCALING_AGENTS).contains(&n)) {
+            anyhow::bail!("scaling: {n} agents (2 to {MAX_SCALING_AGENTS})");
+        }
+        anyhow::ensure!(self.writers >= 1, "scaling: `writers` is 0");
+        anyhow::ensure!(
+            self.write_rate_hz.is_finite() && self.write_rate_hz > 0.0,
+            "scaling: `write_rate_hz` {} is not a positive rate",
+            self.write_rate_hz
+        );
+        anyhow::ensure!(
+            (1..=MAX_SCALING_WINDOW_MS).contains(&self.window_ms),
+            "scaling: `window_ms` {} (1 to {MAX_SCALING_WINDOW_MS})",
+            self.window_ms
+        );
+        anyhow::ensure!(self.announce_ms >= 1, "scaling: `announce_ms` is 0");
+        Ok(())
+    }
 }
 
 /// How an experiment runs.

@@ -1,7 +1,8 @@
 //! The report's text against a frozen copy: `report.md` and `results.json` of a fixed, hand-made set of results
 //! (no run, no clock) must stay byte for byte what the report wrote before its sections were split into files.
 //! The golden files were written by the code before the split (commit 7f61e71's `report.rs`); regenerate them with
-//! `UPDATE_GOLDEN=1` only for a change that means to alter the report, and say so in the commit.
+//! `UPDATE_GOLDEN=1` only for a change that means to alter the report, and say so in the commit. (Changed since:
+//! the "Control traffic against number of agents" section and `results.json`'s `scaling`, added after the split.)
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -10,10 +11,10 @@ use measure::Provenance;
 use measure::latency::{self, PayloadClass, Percentiles};
 use measure::provenance::{DatasetChecksum, Machine};
 use measure::results::{
-    AgentCost, Bandwidth, FaultRun, PartitionResult, PhaseSummary, Results, RolesResult, RunResult, StepRecord,
-    Timeline, TimelineResult,
+    AgentCost, Bandwidth, FaultRun, KindTraffic, PartitionResult, PhaseSummary, Results, RolesResult, RunResult,
+    ScalingResult, ScalingRow, StepRecord, Timeline, TimelineResult,
 };
-use measure::spec::{ExperimentSet, TimelineExperiment};
+use measure::spec::{ExperimentSet, ScalingExperiment, TimelineExperiment};
 
 const SET: &str = r#"
 agents = [2, 4]
@@ -105,6 +106,47 @@ fn run(workload: &str, transport: &str, agents: u32, seed: u64, base_ns: u64) ->
         latency_histogram: latencies,
         convergence_histogram: windows,
         timeline: Default::default(),
+    }
+}
+
+/// Two groups of the control-traffic simulation, numbers made by hand.
+fn scaling() -> ScalingResult {
+    let row = |agents: u32, announces: u64, announce_bytes: u64| {
+        let received = u64::from(agents - 1);
+        let kinds = BTreeMap::from([
+            (
+                "announce".to_owned(),
+                KindTraffic {
+                    samples_sent: announces,
+                    bytes_sent: announces * announce_bytes,
+                    samples_received: announces * received,
+                    bytes_received: announces * announce_bytes * received,
+                },
+            ),
+            (
+                "delta".to_owned(),
+                KindTraffic {
+                    samples_sent: 1_000,
+                    bytes_sent: 45_000,
+                    samples_received: 1_000 * received,
+                    bytes_received: 45_000 * received,
+                },
+            ),
+            ("deltas".to_owned(), KindTraffic { samples_sent: 2, bytes_sent: 300, ..KindTraffic::default() }),
+        ]);
+        ScalingRow { agents, window_ms: 10_000, writes: 1_000, kinds, converged: true }
+    };
+    ScalingResult {
+        experiment: ScalingExperiment {
+            agents: vec![8, 32],
+            writers: 4,
+            write_rate_hz: 100.0,
+            window_ms: 10_000,
+            announce_ms: 500,
+            announce_group: 8,
+            seed: 1,
+        },
+        rows: vec![row(8, 160, 90), row(32, 160, 90)],
     }
 }
 
@@ -233,6 +275,7 @@ fn results() -> Results {
         partition,
         timeline: Some(timeline()),
         roles: Some(serde_json::from_str::<RolesResult>(ROLES).unwrap()),
+        scaling: Some(scaling()),
         seconds: 12.5,
     }
 }

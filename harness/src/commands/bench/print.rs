@@ -4,6 +4,7 @@ use measure::bench::fanout::{FanoutFigures, FanoutResult};
 use measure::bench::join::{JoinBreakdown, JoinResult};
 use measure::bench::rtt::RttResult;
 use measure::bench::{Counting, loadavg};
+use measure::results::{CONTROL_KINDS, DATA_KINDS, ScalingResult};
 
 /// The RTT table: agent and raw loops of every delivery, then the socket-level bytes or why they are missing.
 pub(super) fn rtt(result: &RttResult, counting: &Counting) {
@@ -156,4 +157,49 @@ fn fanout_row(run: &FanoutFigures, header: bool, rate: f64, counting: &Counting)
         fmt(run.megabytes_per_second, 2),
         run.estimated_wire_bytes_per_frame,
     );
+}
+
+/// `cortex bench scaling`'s table: per second of the window, envelope bytes.
+pub(super) fn scaling(result: &ScalingResult) {
+    let e = &result.experiment;
+    println!(
+        "Seeded simulator, in-process bus: {} writers, {} writes/s, {} ms window, announce every {} ms, announce \
+         group {}, seed {}; envelope bytes per second",
+        e.writers,
+        e.write_rate_hz,
+        e.window_ms,
+        e.announce_ms,
+        if e.announce_group == 0 { "none (every agent every period)".to_owned() } else { e.announce_group.to_string() },
+        e.seed
+    );
+    println!(
+        "{:>5} {:>9} {:>12} {:>16} {:>18} {:>16} {:>14} {:>18} {:>9}",
+        "N",
+        "writes/s",
+        "announces/s",
+        "control B/s all",
+        "control rx/agent",
+        "control rx all",
+        "data B/s all",
+        "data rx/agent",
+        "converged"
+    );
+    for row in &result.rows {
+        let n = f64::from(row.agents);
+        let control = row.sum(CONTROL_KINDS);
+        let data = row.sum(DATA_KINDS);
+        let announces = row.kinds.get("announce").map_or(0, |k| k.samples_sent);
+        println!(
+            "{:>5} {:>9.0} {:>12.1} {:>16.0} {:>18.0} {:>16.0} {:>14.0} {:>18.0} {:>9}",
+            row.agents,
+            row.per_second(row.writes),
+            row.per_second(announces),
+            row.per_second(control.bytes_sent),
+            row.per_second(control.bytes_received) / n,
+            row.per_second(control.bytes_received),
+            row.per_second(data.bytes_sent),
+            row.per_second(data.bytes_received) / n,
+            if row.converged { "yes" } else { "NO" }
+        );
+    }
 }

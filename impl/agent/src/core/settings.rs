@@ -23,8 +23,12 @@ pub struct ProtocolConfig {
     pub join_wait_ns: u64,
     /// How often to repeat the graph request while joining.
     pub join_retry_ns: u64,
-    /// How often to announce the applied operations.
+    /// How often to announce the applied operations while the group is small (see `announce_group`).
     pub announce_period_ns: u64,
+    /// The number of agents whose announces fit in one announce period: with more agents heard, each announces
+    /// less often, in proportion, so the group as a whole sends about this many announces per period whatever
+    /// its size (0: every agent announces every period, however many there are).
+    pub announce_group: u32,
     /// Announce once more this long after the last local write (0: never).
     pub quiet_announce_ns: u64,
     /// History kept for anti-entropy.

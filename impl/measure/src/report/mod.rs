@@ -20,6 +20,7 @@ mod payload;
 mod provenance;
 mod recordings;
 mod roles;
+mod scaling;
 mod timeline;
 
 use std::fmt::Write as _;
@@ -63,6 +64,7 @@ pub const SECTIONS: &[Section] = &[
     cpu::SECTION,
     timeline::SECTION,
     roles::SECTION,
+    scaling::SECTION,
     not_measured::SECTION,
     datasets::SECTION,
     recordings::SECTION,

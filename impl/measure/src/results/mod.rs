@@ -5,6 +5,7 @@
 mod partition;
 mod roles;
 mod run;
+mod scaling;
 mod timeline;
 
 use serde::Serialize;
@@ -12,6 +13,7 @@ use serde::Serialize;
 pub use partition::PartitionResult;
 pub use roles::{AgentRow, ComponentRow, RolesResult};
 pub use run::{AgentCost, Bandwidth, MAX_TIMELINE_WRITES, RunResult, TimelineWrite, WriteTimeline};
+pub use scaling::{CONTROL_KINDS, DATA_KINDS, KindTraffic, REPAIR_KINDS, ScalingResult, ScalingRow};
 pub use timeline::{PhaseSummary, StepRecord, Timeline, TimelineResult};
 
 use crate::provenance::Provenance;
@@ -52,6 +54,10 @@ pub struct Results {
     /// The detector roles' replay over RTPS, if the set has one (added to schema version 1 like `timeline`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub roles: Option<RolesResult>,
+    /// Control traffic against the number of agents, if the set has a `scaling` section (added to schema version 2
+    /// without a bump: a new field, absent when the set has none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scaling: Option<ScalingResult>,
     /// Wall-clock seconds of the whole set.
     pub seconds: f64,
 }
