@@ -222,6 +222,42 @@ fn converges_under_loss_duplication_reordering_partition_and_restart_many_seeds(
     }
 }
 
+/// Twelve agents in groups of four: each announces every third period. A partition with writes on both sides
+/// heals with no write after it, so only periodic announces can start the repair.
+fn large_group_scenario(seed: u64) {
+    let mut sim = Sim::new(seed, faults());
+    let group = |config: AgentConfig| AgentConfig { announce_group: 4, ..config };
+    sim.spawn_with(1, group);
+    sim.steps(400);
+    for id in 2..=12 {
+        sim.spawn_with(id, group);
+    }
+    sim.steps(400);
+    assert!(sim.agents.iter().all(Agent::is_ready), "seed {seed}: every joiner got the graph");
+    for _ in 0..200 {
+        sim.random_write();
+        sim.step();
+    }
+    let ids: Vec<_> = sim.agents.iter().map(|a| a.transport().local_id()).collect();
+    sim.plan.partition(&ids[..5], &ids[5..]);
+    for _ in 0..200 {
+        sim.random_write();
+        sim.step();
+    }
+    sim.plan.heal();
+    sim.settle(20_000);
+    for agent in &sim.agents {
+        assert_eq!(agent.status().digest_mismatches, 0, "seed {seed}");
+    }
+}
+
+#[test]
+fn a_group_larger_than_its_announce_group_converges_after_a_partition_healed_without_writes() {
+    for seed in 0..3 {
+        large_group_scenario(seed);
+    }
+}
+
 #[test]
 fn late_joiner_gets_the_seed_graph_from_any_peer_and_signals_flow_with_origins() {
     let mut sim = Sim::new(99, FaultConfig::default());
