@@ -15,20 +15,20 @@ pub const IN_TYPES: &[&str] = &["sensor_msgs/msg/LaserScan", "sensor_msgs/msg/Im
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// The file cannot be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Read {
         /// The file.
         path: String,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The text is not a valid bridge file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Parse {
         /// The file.
         path: String,
         /// The TOML error, with its line and column.
-        source: Box<toml::de::Error>,
+        error: Box<toml::de::Error>,
     },
     /// A field has a value the bridge cannot use.
     #[error("{path}: {field}: {what}")]
@@ -167,7 +167,7 @@ impl BridgeConfig {
     /// [`ConfigError`] naming the file and the field.
     pub fn load(path: &Path) -> Result<BridgeConfig, ConfigError> {
         let shown = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: shown.clone(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Read { path: shown.clone(), error })?;
         BridgeConfig::parse(&text, &shown)
     }
 
@@ -176,8 +176,8 @@ impl BridgeConfig {
     /// # Errors
     /// [`ConfigError`] naming the field.
     pub fn parse(text: &str, path: &str) -> Result<BridgeConfig, ConfigError> {
-        let config: BridgeConfig = toml::from_str(text)
-            .map_err(|source| ConfigError::Parse { path: path.into(), source: Box::new(source) })?;
+        let config: BridgeConfig =
+            toml::from_str(text).map_err(|error| ConfigError::Parse { path: path.into(), error: Box::new(error) })?;
         config.check().map_err(|(field, what)| ConfigError::Invalid { path: path.into(), field, what })?;
         Ok(config)
     }
