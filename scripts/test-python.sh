@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The Python module's part of the test command (scripts/test.sh runs it; it also runs alone): builds `cortex_dsr`
 # into a virtual environment under the cargo target directory with maturin, builds the `cortex` binary for the
-# two-process test, and runs the Python tests (plain unittest). As root on a machine without Python's venv module,
-# installs it first with apt.
+# two-process and ROS 2 bridge tests, and runs the Python tests (plain unittest). As root on a machine without
+# Python's venv module, installs it first with apt.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 target="${CARGO_TARGET_DIR:-$PWD/target}"
@@ -18,7 +18,9 @@ fi
 if [ ! -x "$venv/bin/python" ]; then
   python3 -m venv "$venv"
 fi
-"$venv/bin/python" -m pip install -q --disable-pip-version-check "maturin>=1.9,<2" "numpy>=1.21"
+# cyclonedds: Eclipse Cyclone DDS's Python binding (its wheel bundles the C library), the second vendor's DDS that
+# python/tests/test_ros2_bridge.py runs `cortex bridge ros2` against.
+"$venv/bin/python" -m pip install -q --disable-pip-version-check "maturin>=1.9,<2" "numpy>=1.21" "cyclonedds>=11,<12"
 cargo build -q -p harness --bin cortex
 # A debug build, installed into the venv (README: `pip install ./python` builds the release wheel instead).
 VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop -q --manifest-path python/Cargo.toml

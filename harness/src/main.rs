@@ -34,6 +34,8 @@ enum Command {
     Agent(commands::agent::AgentArgs),
     /// Measure agents: round-trip time and graph join.
     Bench(commands::bench::BenchArgs),
+    /// Live bridges between the graph and other middleware: `bridge ros2 --config FILE.toml`.
+    Bridge(commands::bridge::BridgeArgs),
     /// Serve a web inspector of the live graph and the BICA debug primitives.
     Inspect(commands::inspect::InspectArgs),
     /// Run an experiment set and write a report (results.json, figures, report.md).
@@ -82,6 +84,7 @@ fn main() -> ExitCode {
         Command::Datasets(args) => commands::datasets::run(args),
         Command::Agent(args) => commands::agent::run(args),
         Command::Bench(args) => commands::bench::run(args),
+        Command::Bridge(args) => commands::bridge::run(args),
         Command::Inspect(args) => commands::inspect::run(args),
         Command::Report(args) => commands::report::run(args),
         Command::MeasureReceiver(args) => commands::receiver::run(args),

@@ -9,8 +9,6 @@ import tempfile
 import time
 import unittest
 
-import cortex_dsr
-
 # Each graph of a test gets its own topic prefix on domain 0, so no agent of another test (or of another run of
 # the suite) answers its graph request: it starts alone from the fixture after a short join wait.
 _PREFIXES = itertools.count(1)
@@ -78,6 +76,8 @@ class Fixture:
 
 def new_graph(path, agent_id=12, prefix=None, join_wait_ms=300):
     """A DSRGraph that starts alone from `path` (pydsr's arguments, plus this test's own topic)."""
+    import cortex_dsr  # here, so that tests of the `cortex` binary alone (the ROS 2 bridge's) run without the module
+
     return cortex_dsr.DSRGraph(0, "test", agent_id, path, True,
                                topic_prefix=prefix or topic_prefix(), join_wait_ms=join_wait_ms)
 

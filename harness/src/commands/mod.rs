@@ -4,6 +4,7 @@
 
 pub mod agent;
 pub mod bench;
+pub mod bridge;
 pub mod chaos;
 pub mod check;
 pub mod datasets;
