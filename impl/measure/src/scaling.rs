@@ -2,7 +2,7 @@
 //! by hand on one manual clock (the seeded simulator of `impl/agent/tests/simulation.rs`), every sample counted
 //! by message kind as it is published and as each agent takes it off its inbox.
 //!
-//! A run: N agents start together; agent 1 starts the graph alone after the join wait and the others join it; each
+//! A run: N agents start together; agent 1 starts the graph alone at once and the others join it; each
 //! writer inserts one node; then, in the measured window, the writers take turns writing a float attribute of their
 //! own node at the experiment's total rate. The window's traffic by kind is the row. After the window the agents
 //! run on (no writes) until every digest is equal, or a bounded settling time passes.
@@ -21,7 +21,7 @@ use anyhow::Context as _;
 use bytes::Bytes;
 use dsr::{NewNode, NodeId, attrs};
 use transport::inproc::{Bus, InProcTransport};
-use transport::{Channel, Clock, EndpointId, ManualClock, Sample, Transport, TransportError, TransportStats};
+use transport::{Channel, EndpointId, ManualClock, Sample, Transport, TransportError, TransportStats};
 
 use crate::results::{KindTraffic, ScalingResult, ScalingRow};
 use crate::spec::ScalingExperiment;
@@ -120,8 +120,9 @@ impl Group {
                 announce_period: Duration::from_millis(experiment.announce_ms),
                 announce_group: experiment.announce_group,
                 nonce: Some(experiment.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(u64::from(id)) | 1),
-                // Agent 1 starts the graph; the others join it, asking again every 20 ms until it answers.
-                join_wait: Duration::from_millis(if id == 1 { 50 } else { SETTLE_LIMIT_MS }),
+                // Agent 1 starts the graph at its first pump, before anything reaches it; the others join it,
+                // asking again every 20 ms until it answers.
+                join_wait: if id == 1 { Duration::ZERO } else { Duration::from_millis(SETTLE_LIMIT_MS) },
                 join_retry: Duration::from_millis(20),
                 ..AgentConfig::new(AgentId(id))
             };

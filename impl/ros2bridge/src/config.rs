@@ -202,16 +202,37 @@ impl BridgeConfig {
                 return Err((field("topic"), format!("{} is read twice", input.topic)));
             }
         }
+        self.check_outputs()
+    }
+
+    /// The output entries, and that no topic is written twice or both read and written (the bridge would read
+    /// back what it writes: `/tf` both ways echoes every transform).
+    fn check_outputs(&self) -> Result<(), (String, String)> {
+        let mut written: Vec<(String, &str)> = Vec::new();
         if let Some(tf) = &self.tf_out {
             check_rate(tf.rate_hz).map_err(|what| ("tf_out.rate_hz".to_owned(), what))?;
+            written.extend([("tf_out".to_owned(), "/tf"), ("tf_out".to_owned(), "/tf_static")]);
         }
         for (i, out) in self.image_out.iter().enumerate() {
             check_topic(&out.topic).map_err(|what| (format!("image_out[{i}].topic"), what))?;
             check_rate(out.rate_hz).map_err(|what| (format!("image_out[{i}].rate_hz"), what))?;
+            written.push((format!("image_out[{i}]"), &out.topic));
         }
         for (i, out) in self.laser_out.iter().enumerate() {
             check_topic(&out.topic).map_err(|what| (format!("laser_out[{i}].topic"), what))?;
             check_rate(out.rate_hz).map_err(|what| (format!("laser_out[{i}].rate_hz"), what))?;
+            written.push((format!("laser_out[{i}]"), &out.topic));
+        }
+        for (j, (entry, topic)) in written.iter().enumerate() {
+            if let Some((earlier, _)) = written[..j].iter().find(|(_, other)| other == topic) {
+                return Err((format!("{entry}.topic"), format!("{topic} is also written by {earlier}")));
+            }
+            if let Some(i) = self.inputs.iter().position(|input| input.topic == *topic) {
+                return Err((
+                    format!("{entry}.topic"),
+                    format!("{topic} is also read by in[{i}]: the bridge would read back what it writes"),
+                ));
+            }
         }
         Ok(())
     }
@@ -257,7 +278,7 @@ mod tests {
         type = "sensor_msgs/msg/LaserScan"
         max_rate_hz = 5.0
         [[in]]
-        topic = "/tf_static"
+        topic = "/robot/tf_static"
         type = "tf2_msgs/msg/TFMessage"
         qos = "static"
         [tf_out]
@@ -288,6 +309,9 @@ mod tests {
         assert!(BridgeConfig::parse(&bad_rate, "x.toml").unwrap_err().to_string().contains("in[0].max_rate_hz"));
         let bad_topic = EXAMPLE.replace("\"/graph/scan\"", "\"graph scan\"");
         assert!(BridgeConfig::parse(&bad_topic, "x.toml").unwrap_err().to_string().contains("laser_out[0].topic"));
+        let echo = EXAMPLE.replace("\"/graph/scan\"", "\"/scan\"");
+        let error = BridgeConfig::parse(&echo, "x.toml").unwrap_err().to_string();
+        assert!(error.contains("laser_out[0].topic") && error.contains("also read by in[0]"), "{error}");
         let unknown = format!("{EXAMPLE}\nspeed = 3\n");
         assert!(BridgeConfig::parse(&unknown, "x.toml").unwrap_err().to_string().contains("speed"));
     }

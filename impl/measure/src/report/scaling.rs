@@ -42,7 +42,6 @@ fn draw(results: &Results, out: &Path) -> anyhow::Result<()> {
         ],
         footer: footer(&results.provenance, HOW),
         legend_upper_left: true,
-        ..Chart::default()
     };
     figures::render(&chart, out, FIGURE)
 }
