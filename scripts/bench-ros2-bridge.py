@@ -10,11 +10,19 @@ Reported, each as median and p99 over the same samples:
   graph -> DDS      graph change signal -> the LaserScan written to DDS (in the bridge)
   pub -> graph -> sub  stamp -> the scan back at the Cyclone reader (here; all on one host clock)
 
-graph -> subscriber is not measured per sample on its own; `pub -> graph -> sub` minus `pub -> graph` (medians) is
-printed as its estimate. Usage (the venv of scripts/test-python.sh has cyclonedds):
+With `--from-graph`, the other direction on its own, per sample: this script is also a graph agent (`cortex_dsr`)
+and writes a laser node's `laser_dists`, `laser_angles` and `stamp_ns` (the wall clock just before the write) in one
+`update_node`; the bridge, another agent of the same graph, publishes the node as a LaserScan whose header stamp is
+`stamp_ns`, and a Cyclone reader here takes it:
+
+  graph write -> sub   stamp -> the scan at the Cyclone reader (a write in one agent, replicated over RTPS to
+                       the bridge agent, published to Cyclone; all on one host clock)
+
+Usage (the venv of scripts/test-python.sh has cyclonedds and, for --from-graph, cortex_dsr; build that with
+`maturin develop --release` for a figure that does not include a debug build's cost):
 
   target/python-venv/bin/python scripts/bench-ros2-bridge.py [--count 1000] [--rate-hz 100] [--beams 360]
-      [--cortex target/release/cortex] [--qos sensor|default]
+      [--cortex target/release/cortex] [--qos sensor|default] [--from-graph]
 """
 
 import argparse
@@ -63,7 +71,10 @@ def main():
     parser.add_argument("--beams", type=int, default=360)
     parser.add_argument("--qos", choices=["sensor", "default"], default="sensor")
     parser.add_argument("--cortex", default=os.path.join("target", "release", "cortex"))
+    parser.add_argument("--from-graph", action="store_true", help="graph write -> Cyclone subscriber, per sample")
     args = parser.parse_args()
+    if args.from_graph:
+        return from_graph(args)
 
     workdir = tempfile.mkdtemp(prefix="cortex_ros2_bench_")
     config = os.path.join(workdir, "bridge.toml")
@@ -156,6 +167,106 @@ qos = "{args.qos}"
     print(f"  {'graph -> subscriber (estimate: difference of medians)':42s} p50 "
           f"{percentile(e2e_us, 0.5) - lat_in['in_graph']['p50_us']:9.0f} us")
     print(f"  samples back: {len(e2e_us)} of {len(sent)}; bridge counters: {json.dumps(status['inputs'][0])}")
+
+
+def start_bridge(args, config_text):
+    """Starts `cortex bridge ros2` on a file of `config_text`; returns the process and its latest status."""
+    workdir = tempfile.mkdtemp(prefix="cortex_ros2_bench_")
+    config = os.path.join(workdir, "bridge.toml")
+    with open(config, "w") as f:
+        f.write(config_text)
+    bridge = subprocess.Popen([args.cortex, "bridge", "ros2", "--config", config, "--json-status", "--status-ms",
+                               "200", "--state-dir", "none", "--control-stdin", "--join-wait-ms", "300"],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    latest = {}
+
+    def read_status():
+        for line in bridge.stdout:
+            try:
+                latest.update(json.loads(line))
+            except ValueError:
+                pass
+    threading.Thread(target=read_status, daemon=True).start()
+    deadline = time.monotonic() + 60
+    while not latest.get("agent", {}).get("ready") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if not latest.get("agent", {}).get("ready"):
+        sys.exit("the bridge's agent did not become ready within 60 s")
+    return bridge, latest
+
+
+def from_graph(args):
+    """Graph write (this script's agent) -> bridge agent -> Cyclone subscriber, per sample."""
+    from cortex_dsr import Attribute, DSRGraph, Node
+    import numpy as np
+
+    prefix = f"ros2benchg{os.getpid()}"
+    bridge, latest = start_bridge(args, f"""ros_domain = {ROS_DOMAIN}
+dsr_prefix = "{prefix}"
+agent_id = 210
+[[laser_out]]
+node = "bench_laser"
+topic = "/bench_out"
+rate_hz = 10000.0
+qos = "{args.qos}"
+""")
+    graph = DSRGraph(0, "bench", 211, topic_prefix=prefix, join_wait_ms=3000)
+    dp = DomainParticipant(ROS_DOMAIN)
+    reader = DataReader(dp, Topic(dp, "rt/bench_out", ros.LaserScan), qos=qos(args.qos))
+    received = {}
+
+    def take():
+        while True:
+            for sample in reader.take(N=64):
+                if isinstance(sample, ros.LaserScan):
+                    received.setdefault(ros.stamp_ns(sample.header), time.time_ns())
+            time.sleep(0.0002)
+    threading.Thread(target=take, daemon=True).start()
+
+    dists = np.array([1000.0 + (i % 100) * 10 for i in range(args.beams)], dtype=np.float32)
+    angles = np.linspace(-1.0, 1.0, args.beams, dtype=np.float32)
+    node = Node(211, "laser", "bench_laser")
+    node.attrs["laser_dists"] = Attribute(dists, 211)
+    node.attrs["laser_angles"] = Attribute(angles, 211)
+    node.attrs["stamp_ns"] = Attribute(time.time_ns(), 211)
+    graph.insert_node(node)
+
+    def write(stamp):
+        # update_node sends only what changed, and the bridge publishes on a new `laser_dists` write: vary a beam.
+        dists[0] = float(stamp % 1_000_000) / 100.0
+        node = graph.get_node("bench_laser")
+        node.attrs["laser_dists"] = Attribute(dists, 211)
+        node.attrs["stamp_ns"] = Attribute(stamp, 211)
+        graph.update_node(node)
+
+    deadline = time.monotonic() + 60
+    while not received and time.monotonic() < deadline:  # warm-up: discovery both ways, not counted
+        write(time.time_ns())
+        time.sleep(0.1)
+    if not received:
+        sys.exit("no scan reached the Cyclone reader within 60 s")
+    time.sleep(0.5)
+    received.clear()
+    sent = []
+    period = 1.0 / args.rate_hz
+    next_at = time.monotonic()
+    for _ in range(args.count):
+        stamp = time.time_ns()
+        write(stamp)
+        sent.append(stamp)
+        next_at += period
+        time.sleep(max(0.0, next_at - time.monotonic()))
+    time.sleep(1.0)
+    graph.close()
+    bridge.stdin.close()
+    bridge.wait(timeout=30)
+    us = [(received[s] - s) / 1000 for s in sent if s in received]
+    load = open("/proc/loadavg").read().split()[:3]
+    print(f"ROS 2 bridge, graph -> subscriber: {args.count} laser writes of {args.beams} beams at {args.rate_hz:g} Hz "
+          f"in a second agent, QoS {args.qos}, loopback, load average {' '.join(load)}, {os.cpu_count()} cores")
+    print(f"  {'graph write -> Cyclone subscriber':42s} p50 {percentile(us, 0.5):9.0f} us   "
+          f"p99 {percentile(us, 0.99):9.0f} us")
+    print(f"  samples: {len(us)} of {len(sent)}; bridge status: {json.dumps(latest['bridge'].get('outputs'))}")
 
 
 if __name__ == "__main__":
