@@ -237,13 +237,21 @@ pub fn run(args: AgentArgs) -> Result<()> {
         println!("{}", status_json(&agent, started));
     }
     if let Some(path) = &args.dump_json {
-        let json = agent
-            .read(dsr::json::export)
-            .context("the agent never got a graph, nothing to dump")?
-            .context("exporting the graph")?;
-        std::fs::write(path, json).with_context(|| format!("writing {}", path.display()))?;
+        dump_graph(&agent, path)?;
     }
     Ok(())
+}
+
+/// Writes the agent's graph as CORTEX JSON to `path` (`--dump-json`).
+///
+/// # Errors
+/// The agent never got a graph, the export failed, or the file cannot be written.
+pub fn dump_graph<T: transport::Transport + 'static>(agent: &Agent<T>, path: &std::path::Path) -> Result<()> {
+    let json = agent
+        .read(dsr::json::export)
+        .context("the agent never got a graph, nothing to dump")?
+        .context("exporting the graph")?;
+    std::fs::write(path, json).with_context(|| format!("writing {}", path.display()))
 }
 
 /// What an agent process runs besides its agent: a role's BICA runtime, or the bridge's log player.

@@ -17,7 +17,7 @@ use ros2bridge::{BridgeConfig, BridgeStatus, Ros2Bridge};
 use serde::Serialize;
 use transport::rtps::RtpsConfig;
 
-use super::agent::{life_file, start_rtps_agent};
+use super::agent::{dump_graph, life_file, start_rtps_agent};
 
 /// `cortex bridge`.
 #[derive(Debug, Args)]
@@ -132,11 +132,7 @@ fn run_ros2(args: Ros2Args) -> Result<()> {
     }
     agent.shutdown();
     if let Some(path) = &args.dump_json {
-        let json = agent
-            .read(dsr::json::export)
-            .context("the agent never got a graph, nothing to dump")?
-            .context("exporting the graph")?;
-        std::fs::write(path, json).with_context(|| format!("writing {}", path.display()))?;
+        dump_graph(&agent, path)?;
     }
     Ok(())
 }

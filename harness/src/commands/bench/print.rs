@@ -4,7 +4,7 @@ use measure::bench::fanout::{FanoutFigures, FanoutResult};
 use measure::bench::join::{JoinBreakdown, JoinResult};
 use measure::bench::rtt::RttResult;
 use measure::bench::{Counting, loadavg};
-use measure::results::{CONTROL_KINDS, DATA_KINDS, ScalingResult};
+use measure::results::ScalingResult;
 
 /// The RTT table: agent and raw loops of every delivery, then the socket-level bytes or why they are missing.
 pub(super) fn rtt(result: &RttResult, counting: &Counting) {
@@ -185,20 +185,17 @@ pub(super) fn scaling(result: &ScalingResult) {
         "converged"
     );
     for row in &result.rows {
-        let n = f64::from(row.agents);
-        let control = row.sum(CONTROL_KINDS);
-        let data = row.sum(DATA_KINDS);
-        let announces = row.kinds.get("announce").map_or(0, |k| k.samples_sent);
+        let r = row.rates();
         println!(
             "{:>5} {:>9.0} {:>12.1} {:>16.0} {:>18.0} {:>16.0} {:>14.0} {:>18.0} {:>9}",
             row.agents,
-            row.per_second(row.writes),
-            row.per_second(announces),
-            row.per_second(control.bytes_sent),
-            row.per_second(control.bytes_received) / n,
-            row.per_second(control.bytes_received),
-            row.per_second(data.bytes_sent),
-            row.per_second(data.bytes_received) / n,
+            r.writes,
+            r.announces_sent,
+            r.control_bytes_sent,
+            r.control_bytes_received_per_agent,
+            r.control_bytes_received,
+            r.data_bytes_sent,
+            r.data_bytes_received_per_agent,
             if row.converged { "yes" } else { "NO" }
         );
     }

@@ -9,7 +9,7 @@ use std::path::Path;
 use super::format::{figure, footer};
 use super::{Context, Section};
 use crate::figures::{self, Chart, Series};
-use crate::results::{CONTROL_KINDS, DATA_KINDS, REPAIR_KINDS, Results, ScalingResult, ScalingRow};
+use crate::results::{Results, ScalingRates, ScalingResult, ScalingRow};
 
 const FIGURE: &str = "control_traffic_vs_agents";
 
@@ -22,11 +22,10 @@ const HOW: &str = "in-process bus, seeded simulator: N real agent::Agent values 
 
 fn draw(results: &Results, out: &Path) -> anyhow::Result<()> {
     let Some(result) = &results.scaling else { return Ok(()) };
-    let line = |name: &str, value: &dyn Fn(&ScalingRow) -> f64| Series {
+    let line = |name: &str, value: &dyn Fn(ScalingRates) -> f64| Series {
         name: name.to_owned(),
-        points: result.rows.iter().map(|row| (f64::from(row.agents), value(row))).collect(),
+        points: result.rows.iter().map(|row| (f64::from(row.agents), value(row.rates()))).collect(),
     };
-    let per_agent = |row: &ScalingRow, bytes: u64| row.per_second(bytes) / f64::from(row.agents);
     let chart = Chart {
         title: "Anti-entropy and data traffic against number of agents".into(),
         x_label: "agents".into(),
@@ -34,11 +33,11 @@ fn draw(results: &Results, out: &Path) -> anyhow::Result<()> {
         x_log: true,
         y_log: true,
         series: vec![
-            line("control sent, all agents", &|r| r.per_second(r.sum(CONTROL_KINDS).bytes_sent)),
-            line("control received, per agent", &|r| per_agent(r, r.sum(CONTROL_KINDS).bytes_received)),
-            line("repairs sent, all agents", &|r| r.per_second(r.sum(REPAIR_KINDS).bytes_sent)),
-            line("data sent, all agents", &|r| r.per_second(r.sum(DATA_KINDS).bytes_sent)),
-            line("data received, per agent", &|r| per_agent(r, r.sum(DATA_KINDS).bytes_received)),
+            line("control sent, all agents", &|r| r.control_bytes_sent),
+            line("control received, per agent", &|r| r.control_bytes_received_per_agent),
+            line("repairs sent, all agents", &|r| r.repair_bytes_sent),
+            line("data sent, all agents", &|r| r.data_bytes_sent),
+            line("data received, per agent", &|r| r.data_bytes_received_per_agent),
         ],
         footer: footer(&results.provenance, HOW),
         legend_upper_left: true,
@@ -76,22 +75,19 @@ fn write(md: &mut String, r: &Results, _: &Context<'_>) {
 }
 
 fn table_row(md: &mut String, row: &ScalingRow) {
-    let n = f64::from(row.agents);
-    let control = row.sum(CONTROL_KINDS);
-    let data = row.sum(DATA_KINDS);
-    let announces = row.kinds.get("announce").map_or(0, |k| k.samples_sent);
+    let r = row.rates();
     let _ = writeln!(
         md,
         "| {} | {:.0} | {:.1} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {} |",
         row.agents,
-        row.per_second(row.writes),
-        row.per_second(announces),
-        row.per_second(control.bytes_sent),
-        row.per_second(control.bytes_received) / n,
-        row.per_second(control.bytes_received),
-        row.per_second(row.sum(REPAIR_KINDS).bytes_sent),
-        row.per_second(data.bytes_sent),
-        row.per_second(data.bytes_received) / n,
+        r.writes,
+        r.announces_sent,
+        r.control_bytes_sent,
+        r.control_bytes_received_per_agent,
+        r.control_bytes_received,
+        r.repair_bytes_sent,
+        r.data_bytes_sent,
+        r.data_bytes_received_per_agent,
         if row.converged { "yes" } else { "no" }
     );
 }
@@ -106,8 +102,8 @@ fn growth(md: &mut String, result: &ScalingResult) {
     if small.agents == large.agents {
         return;
     }
-    let exponent = |value: &dyn Fn(&ScalingRow) -> f64| {
-        let (a, b) = (value(small), value(large));
+    let exponent = |value: &dyn Fn(ScalingRates) -> f64| {
+        let (a, b) = (value(small.rates()), value(large.rates()));
         if a > 0.0 && b > 0.0 {
             format!("{:.2}", (b / a).ln() / (f64::from(large.agents) / f64::from(small.agents)).ln())
         } else {
@@ -120,8 +116,8 @@ fn growth(md: &mut String, result: &ScalingResult) {
          announces sent per second as N^{} (the exponent between the two groups; 1 is linear, 2 quadratic).\n",
         small.agents,
         large.agents,
-        exponent(&|r| r.per_second(r.sum(CONTROL_KINDS).bytes_sent)),
-        exponent(&|r| r.per_second(r.sum(CONTROL_KINDS).bytes_received)),
-        exponent(&|r| r.per_second(r.kinds.get("announce").map_or(0, |k| k.samples_sent))),
+        exponent(&|r| r.control_bytes_sent),
+        exponent(&|r| r.control_bytes_received),
+        exponent(&|r| r.announces_sent),
     );
 }

@@ -13,7 +13,7 @@ use serde::Serialize;
 pub use partition::PartitionResult;
 pub use roles::{AgentRow, ComponentRow, RolesResult};
 pub use run::{AgentCost, Bandwidth, MAX_TIMELINE_WRITES, RunResult, TimelineWrite, WriteTimeline};
-pub use scaling::{CONTROL_KINDS, DATA_KINDS, KindTraffic, REPAIR_KINDS, ScalingResult, ScalingRow};
+pub use scaling::{CONTROL_KINDS, DATA_KINDS, KindTraffic, REPAIR_KINDS, ScalingRates, ScalingResult, ScalingRow};
 pub use timeline::{PhaseSummary, StepRecord, Timeline, TimelineResult};
 
 use crate::provenance::Provenance;

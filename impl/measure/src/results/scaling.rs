@@ -64,10 +64,48 @@ impl ScalingRow {
         total
     }
 
-    /// `bytes` over the window, per second.
-    pub fn per_second(&self, bytes: u64) -> f64 {
-        bytes as f64 * 1_000.0 / self.window_ms.max(1) as f64
+    /// `count` (bytes, samples or writes) over the window, per second.
+    pub fn per_second(&self, count: u64) -> f64 {
+        count as f64 * 1_000.0 / self.window_ms.max(1) as f64
     }
+
+    /// The row's figures per second, as the report and `cortex bench scaling` show them.
+    pub fn rates(&self) -> ScalingRates {
+        let n = f64::from(self.agents.max(1));
+        let (control, data) = (self.sum(CONTROL_KINDS), self.sum(DATA_KINDS));
+        ScalingRates {
+            writes: self.per_second(self.writes),
+            announces_sent: self.per_second(self.kinds.get("announce").map_or(0, |k| k.samples_sent)),
+            control_bytes_sent: self.per_second(control.bytes_sent),
+            control_bytes_received: self.per_second(control.bytes_received),
+            control_bytes_received_per_agent: self.per_second(control.bytes_received) / n,
+            repair_bytes_sent: self.per_second(self.sum(REPAIR_KINDS).bytes_sent),
+            data_bytes_sent: self.per_second(data.bytes_sent),
+            data_bytes_received_per_agent: self.per_second(data.bytes_received) / n,
+        }
+    }
+}
+
+/// One row's figures per second of the window ([`ScalingRow::rates`]); bytes are envelope bytes, "sent" and
+/// "received" summed over all agents unless the name says per agent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScalingRates {
+    /// Writes per second.
+    pub writes: f64,
+    /// Announces published per second.
+    pub announces_sent: f64,
+    /// Control bytes (announces, missing-requests) published per second.
+    pub control_bytes_sent: f64,
+    /// Control bytes taken off all agents' inboxes per second.
+    pub control_bytes_received: f64,
+    /// Control bytes taken off one agent's inbox per second, on average.
+    pub control_bytes_received_per_agent: f64,
+    /// Repair bytes (deltas, snapshots answering missing-requests) published per second.
+    pub repair_bytes_sent: f64,
+    /// Data bytes (the writes' deltas) published per second.
+    pub data_bytes_sent: f64,
+    /// Data bytes taken off one agent's inbox per second, on average.
+    pub data_bytes_received_per_agent: f64,
 }
 
 /// The experiment as run and its rows, one per number of agents.
