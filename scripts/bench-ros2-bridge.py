@@ -76,10 +76,7 @@ def main():
     if args.from_graph:
         return from_graph(args)
 
-    workdir = tempfile.mkdtemp(prefix="cortex_ros2_bench_")
-    config = os.path.join(workdir, "bridge.toml")
-    with open(config, "w") as f:
-        f.write(f"""ros_domain = {ROS_DOMAIN}
+    bridge, latest = start_bridge(args, f"""ros_domain = {ROS_DOMAIN}
 dsr_prefix = "ros2bench{os.getpid()}"
 agent_id = 210
 [[in]]
@@ -92,36 +89,11 @@ topic = "/bench_out"
 rate_hz = 10000.0
 qos = "{args.qos}"
 """)
-    bridge = subprocess.Popen([args.cortex, "bridge", "ros2", "--config", config, "--json-status", "--status-ms",
-                               "200", "--state-dir", "none", "--control-stdin", "--join-wait-ms", "300"],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    latest = {}
-
-    def read_status():
-        for line in bridge.stdout:
-            try:
-                latest.update(json.loads(line))
-            except ValueError:
-                pass
-    threading.Thread(target=read_status, daemon=True).start()
-
     dp = DomainParticipant(ROS_DOMAIN)
     writer = DataWriter(dp, Topic(dp, "rt/bench_in", ros.LaserScan), qos=qos(args.qos))
-    reader = DataReader(dp, Topic(dp, "rt/bench_out", ros.LaserScan), qos=qos(args.qos))
-    received = {}
-
-    def take():
-        while True:
-            for sample in reader.take(N=64):
-                if not isinstance(sample, ros.LaserScan):  # an invalid sample: the writer went away
-                    continue
-                received.setdefault(ros.stamp_ns(sample.header), time.time_ns())
-            time.sleep(0.0002)
-    threading.Thread(target=take, daemon=True).start()
+    received = take_scans(dp, args.qos)
 
     deadline = time.monotonic() + 60
-    while not latest.get("agent", {}).get("ready") and time.monotonic() < deadline:
-        time.sleep(0.05)
     ranges = [1.0 + (i % 100) / 100 for i in range(args.beams)]
     # Warm-up until the round trip works (discovery both ways), not counted.
     while not received and time.monotonic() < deadline:
@@ -169,6 +141,21 @@ qos = "{args.qos}"
     print(f"  samples back: {len(e2e_us)} of {len(sent)}; bridge counters: {json.dumps(status['inputs'][0])}")
 
 
+def take_scans(dp, qos_kind):
+    """Takes the LaserScans on /bench_out on a thread; returns {header stamp: wall clock when taken}."""
+    reader = DataReader(dp, Topic(dp, "rt/bench_out", ros.LaserScan), qos=qos(qos_kind))
+    received = {}
+
+    def take():
+        while True:
+            for sample in reader.take(N=64):
+                if isinstance(sample, ros.LaserScan):  # else an invalid sample: the writer went away
+                    received.setdefault(ros.stamp_ns(sample.header), time.time_ns())
+            time.sleep(0.0002)
+    threading.Thread(target=take, daemon=True).start()
+    return received
+
+
 def start_bridge(args, config_text):
     """Starts `cortex bridge ros2` on a file of `config_text`; returns the process and its latest status."""
     workdir = tempfile.mkdtemp(prefix="cortex_ros2_bench_")
@@ -211,17 +198,7 @@ rate_hz = 10000.0
 qos = "{args.qos}"
 """)
     graph = DSRGraph(0, "bench", 211, topic_prefix=prefix, join_wait_ms=3000)
-    dp = DomainParticipant(ROS_DOMAIN)
-    reader = DataReader(dp, Topic(dp, "rt/bench_out", ros.LaserScan), qos=qos(args.qos))
-    received = {}
-
-    def take():
-        while True:
-            for sample in reader.take(N=64):
-                if isinstance(sample, ros.LaserScan):
-                    received.setdefault(ros.stamp_ns(sample.header), time.time_ns())
-            time.sleep(0.0002)
-    threading.Thread(target=take, daemon=True).start()
+    received = take_scans(DomainParticipant(ROS_DOMAIN), args.qos)
 
     dists = np.array([1000.0 + (i % 100) * 10 for i in range(args.beams)], dtype=np.float32)
     angles = np.linspace(-1.0, 1.0, args.beams, dtype=np.float32)

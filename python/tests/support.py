@@ -5,7 +5,9 @@ import itertools
 import json
 import os
 import shutil
+import subprocess
 import tempfile
+import threading
 import time
 import unittest
 
@@ -123,3 +125,47 @@ class GraphTestCase(unittest.TestCase):
 
     def tearDown(self):
         self.g.close()
+
+
+class StatusProcess:
+    """A `cortex` process started with `--json-status --control-stdin --dump-json DUMP`: its latest status line,
+    read on a thread; `stop` ends it as end of input does and returns the dumped graph's symbols."""
+
+    def __init__(self, command, dump_path):
+        self.dump = dump_path
+        self.latest = {}
+        self.lock = threading.Lock()
+        self.process = subprocess.Popen(
+            [*command, "--json-status", "--status-ms", "100", "--state-dir", "none", "--control-stdin",
+             "--dump-json", dump_path],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.process.stdout:
+            try:
+                status = json.loads(line)
+            except ValueError:
+                continue
+            with self.lock:
+                self.latest = status
+
+    def status(self):
+        with self.lock:
+            return dict(self.latest)
+
+    def stop(self, timeout_s=30):
+        """Ends the process as end of input does (it writes its dump), and returns the dumped graph's symbols."""
+        if self.process.poll() is None:
+            self.process.stdin.close()
+            self.process.wait(timeout=timeout_s)
+        with open(self.dump) as f:
+            return json.load(f)["DSRModel"]["symbols"]
+
+    def kill(self):
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+        for stream in (self.process.stdin, self.process.stdout):
+            if stream and not stream.closed:
+                stream.close()

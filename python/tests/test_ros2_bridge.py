@@ -6,13 +6,10 @@ field; a truncated sample is counted, not fatal; a publisher that disappears and
 bridge's graph dump holds what was sent. Waits have generous deadlines; nothing is asserted about speed."""
 
 import gc
-import json
 import math
 import os
 import shutil
-import subprocess
 import tempfile
-import threading
 import time
 import unittest
 
@@ -85,31 +82,11 @@ rate_hz = 100.0
 """
 
 
-class BridgeProcess:
+class BridgeProcess(support.StatusProcess):
     """A `cortex bridge ros2` process, its JSON status lines read on a thread."""
 
     def __init__(self, binary, config_path, dump_path):
-        self.dump = dump_path
-        self.latest = {}
-        self.lock = threading.Lock()
-        self.process = subprocess.Popen(
-            [binary, "bridge", "ros2", "--config", config_path, "--json-status", "--status-ms", "100",
-             "--state-dir", "none", "--control-stdin", "--join-wait-ms", "300", "--dump-json", dump_path],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        for line in self.process.stdout:
-            try:
-                status = json.loads(line)
-            except ValueError:
-                continue
-            with self.lock:
-                self.latest = status
-
-    def status(self):
-        with self.lock:
-            return dict(self.latest)
+        super().__init__([binary, "bridge", "ros2", "--config", config_path, "--join-wait-ms", "300"], dump_path)
 
     def input(self, topic):
         for counters in self.status().get("bridge", {}).get("inputs", []):
@@ -122,22 +99,6 @@ class BridgeProcess:
             if counters["topic"] == topic:
                 return counters
         return {}
-
-    def stop(self, timeout_s=30):
-        """Ends the bridge as end of input does (it writes its dump); returns the dumped graph's symbols."""
-        if self.process.poll() is None:
-            self.process.stdin.close()
-            self.process.wait(timeout=timeout_s)
-        with open(self.dump) as f:
-            return json.load(f)["DSRModel"]["symbols"]
-
-    def kill(self):
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait()
-        for stream in (self.process.stdin, self.process.stdout):
-            if stream and not stream.closed:
-                stream.close()
 
 
 def yaw_quaternion(yaw):

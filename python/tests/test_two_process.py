@@ -3,11 +3,8 @@ graph a `cortex agent` started from the fixture, its writes reach that agent (no
 second `cortex agent`'s writes reach Python (node insert, attribute write) and fire Python's signals, and every
 agent ends on the same graph digest. Every wait is on a condition with a deadline."""
 
-import json
 import os
 import queue
-import subprocess
-import threading
 import unittest
 
 from cortex_dsr import *  # noqa: F401,F403
@@ -15,47 +12,12 @@ from cortex_dsr import *  # noqa: F401,F403
 import support
 
 
-class CortexAgent:
+class CortexAgent(support.StatusProcess):
     """A `cortex agent` process on this test's topic, its JSON status lines read on a thread."""
 
     def __init__(self, binary, agent_id, prefix, workdir, extra=()):
-        self.dump = os.path.join(workdir, f"dump{agent_id}.json")
-        self.latest = {}
-        self.lock = threading.Lock()
-        self.process = subprocess.Popen(
-            [binary, "agent", "--id", str(agent_id), "--domain", "0", "--topic-prefix", prefix, "--json-status",
-             "--status-ms", "100", "--state-dir", "none", "--control-stdin", "--dump-json", self.dump, *extra],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        for line in self.process.stdout:
-            try:
-                status = json.loads(line)
-            except ValueError:
-                continue
-            with self.lock:
-                self.latest = status
-
-    def status(self):
-        with self.lock:
-            return dict(self.latest)
-
-    def stop(self, timeout_s=30):
-        """Ends the agent as end of input does (it writes its dump), and returns the dumped graph."""
-        if self.process.poll() is None:
-            self.process.stdin.close()
-            self.process.wait(timeout=timeout_s)
-        with open(self.dump) as f:
-            return json.load(f)["DSRModel"]["symbols"]
-
-    def kill(self):
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait()
-        for stream in (self.process.stdin, self.process.stdout):
-            if stream and not stream.closed:
-                stream.close()
+        command = [binary, "agent", "--id", str(agent_id), "--domain", "0", "--topic-prefix", prefix, *extra]
+        super().__init__(command, os.path.join(workdir, f"dump{agent_id}.json"))
 
 
 @unittest.skipUnless(support.cortex_binary(), "the cortex binary is not built (cargo build -p harness --bin cortex)")
