@@ -9,6 +9,7 @@ import gc
 import math
 import os
 import shutil
+import signal
 import tempfile
 import time
 import unittest
@@ -181,7 +182,8 @@ class Ros2BridgeAgainstCyclone(unittest.TestCase):
         self.check_laser_both_ways(scan_out)
         pixels = self.check_image_both_ways(dp, image_out)
         self.check_truncated_sample_is_counted()
-        ranges = self.check_publisher_that_returns(scan_out)
+        self.check_publisher_that_returns(scan_out)
+        ranges = self.check_resumed_after_a_stop_signal(scan_out)
 
         symbols = self.bridge.stop()
         by_name = {s["name"]: s for s in symbols.values()}
@@ -297,6 +299,23 @@ class Ros2BridgeAgainstCyclone(unittest.TestCase):
                       "a scan from the returning publisher to be written")
         got = take_until(scan_out, lambda m: ros.stamp_ns(m.header) == stamp, 60, "the returning publisher's scan")
         self.assertEqual([round(r, 5) for r in got.ranges], ranges)
+        return ranges
+
+    def check_resumed_after_a_stop_signal(self, scan_out):
+        """rustdds's threads end when a stopped process is resumed: the bridge rebuilds its DDS side and goes on."""
+        os.kill(self.bridge.process.pid, signal.SIGSTOP)
+        time.sleep(3.0)
+        os.kill(self.bridge.process.pid, signal.SIGCONT)
+        stamp = time.time_ns()
+        ranges = [2.0, 0.25, 6.5, 1.5]
+
+        def came_back():
+            # An invalid sample says a writer went away (the bridge's old one, after the rebuild).
+            return any(isinstance(m, ros.LaserScan) and ros.stamp_ns(m.header) == stamp for m in scan_out.take(N=64))
+        publish_until(self.scan_writer, scan(stamp, ranges), came_back, 60,
+                      "a scan through the bridge after SIGSTOP and SIGCONT")
+        support.wait_until(lambda: self.bridge.status().get("bridge", {}).get("rebuilds", 0) >= 1, 10,
+                           "the bridge's status to count the rebuild")
         return ranges
 
 

@@ -2,13 +2,14 @@
 //! and a writer per output topic, with ROS 2's topic names, type names and QoS — and its two threads (In:
 //! [`crate::reader`], Out: [`crate::writer`]) over an [`Agent`] of the graph.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use agent::Agent;
 use rustdds::{DomainParticipant, DomainParticipantBuilder, Publisher, Subscriber, TopicKind};
+use transport::rtps::EngineWatch;
 
 use crate::config::{BridgeConfig, dds_topic, dds_type};
 use crate::inbound::Inbound;
@@ -39,12 +40,79 @@ fn setup<E: std::fmt::Debug>(what: impl Into<String>) -> impl FnOnce(E) -> Start
 }
 
 /// A running bridge. Dropping it (or [`Ros2Bridge::stop`]) stops its threads, then leaves the ROS 2 domain.
+///
+/// **Recovery.** `rustdds` 0.15's own threads end for good when the process is resumed after a stop signal (see
+/// `transport::rtps`, "Recovery"), which leaves a participant deaf and mute. A supervisor thread watches the
+/// participant's threads ([`EngineWatch`]) and, when one has ended, stops the In and Out threads, drops the
+/// participant and builds a new one with all its readers and writers (a failed rebuild is tried again a second
+/// later); the counters and latencies carry over, `rebuilds` in the status counts it. ROS 2 peers discover the
+/// new participant like a new node; a reader of `/tf_static` gets the static transforms again from the new writer.
 pub struct Ros2Bridge {
     stop: Arc<AtomicBool>,
-    threads: Vec<JoinHandle<()>>,
+    supervisor: Option<JoinHandle<()>>,
     inputs: Arc<InShared>,
     outputs: Arc<OutShared>,
+    rebuilds: Arc<AtomicU64>,
+}
+
+/// How often the supervisor looks at `rustdds`'s threads.
+const WATCH_INTERVAL: Duration = Duration::from_millis(200);
+/// The least time between two rebuilds.
+const REBUILD_INTERVAL: Duration = Duration::from_secs(1);
+
+/// One participant with its readers, writers and the In and Out threads over them.
+struct Generation {
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+    engine: EngineWatch,
     _participant: DomainParticipant,
+}
+
+impl Generation {
+    /// Joins the domain and starts the threads; `inputs` and `outputs` are the counters they add to.
+    fn start<T: transport::Transport + 'static>(
+        config: &BridgeConfig,
+        agent: &Arc<Agent<T>>,
+        inputs: &Arc<InShared>,
+        outputs: &Arc<OutShared>,
+    ) -> Result<Generation, StartError> {
+        let (participant, engine) = EngineWatch::create(|| DomainParticipantBuilder::new(config.ros_domain).build());
+        let participant = participant.map_err(setup(format!("participant in ROS 2 domain {}", config.ros_domain)))?;
+        let qos = QosProfile::Default.policies();
+        let subscriber = participant.create_subscriber(&qos).map_err(setup("subscriber"))?;
+        let publisher = participant.create_publisher(&qos).map_err(setup("publisher"))?;
+        let readers = create_readers(config, &participant, &subscriber)?;
+        let (writers, counters) = create_outputs(config, &participant, &publisher)?;
+        {
+            // The first generation sets the counters; later ones keep what was counted.
+            let mut kept = lock(&outputs.counters);
+            if kept.is_empty() {
+                *kept = counters;
+            }
+        }
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut threads = Vec::new();
+        if !readers.is_empty() {
+            let (agent, shared, stop) = (Arc::clone(agent), Arc::clone(inputs), Arc::clone(&stop));
+            threads.push(spawn("ros2-bridge-in", move || read_loop(&agent, readers, &shared, &stop))?);
+        }
+        if !writers.is_empty() {
+            let signals = agent.subscribe(SIGNAL_CAPACITY);
+            let (agent, shared, stop) = (Arc::clone(agent), Arc::clone(outputs), Arc::clone(&stop));
+            threads.push(spawn("ros2-bridge-out", move || write_loop(&agent, writers, &signals, &shared, &stop))?);
+        }
+        Ok(Generation { stop, threads, engine, _participant: participant })
+    }
+
+    /// Stops the threads and waits for them; the participant goes with `self`.
+    fn stop(mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        for thread in self.threads.drain(..) {
+            if thread.join().is_err() {
+                tracing::error!("ros2 bridge: a thread panicked");
+            }
+        }
+    }
 }
 
 impl Ros2Bridge {
@@ -57,31 +125,25 @@ impl Ros2Bridge {
         config: &BridgeConfig,
         agent: Arc<Agent<T>>,
     ) -> Result<Ros2Bridge, StartError> {
-        let participant = DomainParticipantBuilder::new(config.ros_domain)
-            .build()
-            .map_err(setup(format!("participant in ROS 2 domain {}", config.ros_domain)))?;
-        let qos = QosProfile::Default.policies();
-        let subscriber = participant.create_subscriber(&qos).map_err(setup("subscriber"))?;
-        let publisher = participant.create_publisher(&qos).map_err(setup("publisher"))?;
-        let readers = create_readers(config, &participant, &subscriber)?;
-        let (outputs, counters) = create_outputs(config, &participant, &publisher)?;
         let inputs = Arc::new(InShared {
             inbound: Mutex::new(Inbound::new(&config.inputs)),
             latencies: Mutex::new(vec![(Latencies::default(), Latencies::default()); config.inputs.len()]),
         });
-        let out_shared = Arc::new(OutShared { counters: Mutex::new(counters), ..OutShared::default() });
+        let outputs = Arc::new(OutShared::default());
+        let generation = Generation::start(config, &agent, &inputs, &outputs)?;
+        if generation.engine.threads() == 0 {
+            tracing::warn!("ros2 bridge: rustdds's threads cannot be watched here (no /proc/self/task): no recovery");
+        }
         let stop = Arc::new(AtomicBool::new(false));
-        let mut threads = Vec::new();
-        if !readers.is_empty() {
-            let (agent, shared, stop) = (Arc::clone(&agent), Arc::clone(&inputs), Arc::clone(&stop));
-            threads.push(spawn("ros2-bridge-in", move || read_loop(&agent, readers, &shared, &stop))?);
-        }
-        if !outputs.is_empty() {
-            let signals = agent.subscribe(SIGNAL_CAPACITY);
-            let (shared, stop) = (Arc::clone(&out_shared), Arc::clone(&stop));
-            threads.push(spawn("ros2-bridge-out", move || write_loop(&agent, outputs, &signals, &shared, &stop))?);
-        }
-        Ok(Ros2Bridge { stop, threads, inputs, outputs: out_shared, _participant: participant })
+        let rebuilds = Arc::new(AtomicU64::new(0));
+        let supervisor = {
+            let (config, inputs, outputs) = (config.clone(), Arc::clone(&inputs), Arc::clone(&outputs));
+            let (stop, rebuilds) = (Arc::clone(&stop), Arc::clone(&rebuilds));
+            spawn("ros2-bridge-watch", move || {
+                supervise(generation, &config, &agent, &inputs, &outputs, &stop, &rebuilds);
+            })?
+        };
+        Ok(Ros2Bridge { stop, supervisor: Some(supervisor), inputs, outputs, rebuilds })
     }
 
     /// The counters and latency summaries so far.
@@ -112,6 +174,7 @@ impl Ros2Bridge {
             bad_rt_edges: *lock(&self.outputs.bad_rt_edges),
             latency_in,
             latency_out: lock(&self.outputs.latency).summary(),
+            rebuilds: self.rebuilds.load(Ordering::Relaxed),
         }
     }
 
@@ -122,10 +185,10 @@ impl Ros2Bridge {
 
     fn stop_threads(&mut self) {
         self.stop.store(true, Ordering::SeqCst);
-        for thread in self.threads.drain(..) {
-            if thread.join().is_err() {
-                tracing::error!("ros2 bridge: a thread panicked");
-            }
+        if let Some(supervisor) = self.supervisor.take()
+            && supervisor.join().is_err()
+        {
+            tracing::error!("ros2 bridge: the supervisor panicked");
         }
     }
 }
@@ -134,6 +197,38 @@ impl Drop for Ros2Bridge {
     fn drop(&mut self) {
         self.stop_threads();
     }
+}
+
+/// Watches the generation's `rustdds` threads until `stop`, rebuilding it when one has ended; stops it at the end.
+fn supervise<T: transport::Transport + 'static>(
+    mut generation: Generation,
+    config: &BridgeConfig,
+    agent: &Arc<Agent<T>>,
+    inputs: &Arc<InShared>,
+    outputs: &Arc<OutShared>,
+    stop: &AtomicBool,
+    rebuilds: &AtomicU64,
+) {
+    while !stop.load(Ordering::SeqCst) {
+        std::thread::sleep(WATCH_INTERVAL);
+        let Some(ended) = generation.engine.ended().map(str::to_owned) else { continue };
+        tracing::error!("ros2 bridge: rustdds's thread {ended:?} has ended (a stop signal?): rebuilding the DDS side");
+        generation.stop();
+        generation = loop {
+            match Generation::start(config, agent, inputs, outputs) {
+                Ok(next) => break next,
+                Err(error) if !stop.load(Ordering::SeqCst) => {
+                    tracing::error!("ros2 bridge: rebuild failed, trying again: {error}");
+                    std::thread::sleep(REBUILD_INTERVAL);
+                }
+                Err(_) => return,
+            }
+        };
+        let n = rebuilds.fetch_add(1, Ordering::Relaxed) + 1;
+        tracing::warn!("ros2 bridge: DDS side rebuilt (rebuild {n}); ROS 2 peers discover it anew");
+        std::thread::sleep(REBUILD_INTERVAL);
+    }
+    generation.stop();
 }
 
 fn spawn(name: &str, body: impl FnOnce() + Send + 'static) -> Result<JoinHandle<()>, StartError> {

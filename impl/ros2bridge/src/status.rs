@@ -106,6 +106,8 @@ pub struct BridgeStatus {
     pub latency_in: Vec<InLatency>,
     /// Graph change signal → message written to DDS, µs, over all output topics.
     pub latency_out: LatencySummary,
+    /// Times the DDS side was rebuilt because `rustdds`'s threads had ended (see [`crate::Ros2Bridge`]).
+    pub rebuilds: u64,
 }
 
 #[cfg(test)]

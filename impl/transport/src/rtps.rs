@@ -123,6 +123,7 @@ use receive::{Outlet, Rebuild, receive_loop};
 use settings::best_effort_max_bytes;
 
 pub use discovery::DiscoveryTimes;
+pub use engine::EngineWatch;
 pub use payload::{OctetsAdapter, OctetsDecoder, Payload, PayloadError, estimated_wire_bytes};
 pub use settings::{Multicast, RtpsConfig, UpdateDelivery, loopback_multicast_capable, qos, routable_ipv4_addresses};
 

@@ -45,3 +45,37 @@ impl EngineThread {
         }
     }
 }
+
+/// The `rustdds` threads of the participants one call created: whoever owns participants outside this transport
+/// (the ROS 2 bridge's own) watches them the same way, and rebuilds when [`EngineWatch::ended`] says one is gone
+/// (after a SIGSTOP/SIGCONT, see the module documentation of `transport::rtps`, "Recovery").
+#[derive(Clone, Debug, Default)]
+pub struct EngineWatch {
+    threads: Vec<EngineThread>,
+}
+
+impl EngineWatch {
+    /// Runs `create` (which creates participants) with participant creation in this process held off meanwhile,
+    /// and returns its result with the `rustdds` threads that appeared during it.
+    pub fn create<R>(create: impl FnOnce() -> R) -> (R, EngineWatch) {
+        let _creating = CREATING_PARTICIPANTS.lock().unwrap_or_else(|p| p.into_inner());
+        let before = EngineThread::all();
+        let created = create();
+        let threads = EngineThread::all().into_iter().filter(|t| !before.contains(t)).collect();
+        (created, EngineWatch { threads })
+    }
+
+    /// The name of a watched thread that has ended, if one has (`rustdds` cannot send or receive without it).
+    pub fn ended(&self) -> Option<&str> {
+        self.threads.iter().find(|thread| !thread.alive()).map(|thread| thread.name.as_str())
+    }
+
+    /// How many threads are watched (2 per participant where `/proc/self/task` can be read, else 0).
+    pub fn threads(&self) -> usize {
+        self.threads.len()
+    }
+
+    pub(super) fn into_threads(self) -> Vec<EngineThread> {
+        self.threads
+    }
+}

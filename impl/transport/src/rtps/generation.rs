@@ -8,7 +8,7 @@ use rustdds::policy::Reliability;
 use rustdds::{DomainParticipant, DomainParticipantBuilder, QosPolicies, RTPSEntity, Topic, TopicKind};
 
 use super::discovery::{DiscoveryState, DiscoveryWatch, Prefix, endpoint_of, prefix_of};
-use super::engine::{CREATING_PARTICIPANTS, EngineThread};
+use super::engine::{EngineThread, EngineWatch};
 use super::payload::{OctetsAdapter, Payload, Reader, Writer};
 use super::settings::{RtpsConfig, best_effort_max_bytes, qos, qos_with, routable_ipv4_addresses};
 use crate::{Channel, EndpointId, TransportError};
@@ -151,17 +151,16 @@ fn join_domain(
             detail: format!("{e:?}"),
         })
     };
-    let (publishing, subscribing, engine) = {
-        let _creating = CREATING_PARTICIPANTS.lock().unwrap_or_else(|p| p.into_inner());
-        let before = EngineThread::all();
+    let (created, watch) = EngineWatch::create(|| -> Result<_, TransportError> {
         let publishing = join("publishing")?;
         // Multicast needs the readers apart too: rustdds never routes a writer to its own participant's
         // readers, and their fallback path would send a second copy.
         let subscribing =
             if config.separate_reader_participant || multicast { Some(join("subscribing")?) } else { None };
-        let engine: Vec<EngineThread> = EngineThread::all().into_iter().filter(|t| !before.contains(t)).collect();
-        (publishing, subscribing, engine)
-    };
+        Ok((publishing, subscribing))
+    });
+    let (publishing, subscribing) = created?;
+    let engine = watch.into_threads();
     let participants = 1 + usize::from(subscribing.is_some());
     if engine.len() != 2 * participants {
         tracing::warn!(
