@@ -154,6 +154,8 @@ const NEW_NODE_NAME: &str = "n";
 const IN: &str = "in";
 /// Type of the transform edges.
 const RT: &str = "RT";
+/// The key of the replicas' choices in Stateright's actions (it only names them).
+const CHOICE_KEY: &str = "choice";
 
 /// The seed graph every replica starts from, with the operations that built it.
 #[derive(Clone, Debug)]
@@ -223,10 +225,13 @@ pub enum OpChoice {
 /// What the checker may choose for a replica.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Choice {
-    /// A local operation.
+    /// A local operation at the replica's current physical clock.
     Op(OpChoice),
-    /// Advance the replica's physical clock by [`TICK_NS`].
-    Tick,
+    /// Advance the replica's physical clock by [`TICK_NS`], then perform the operation. A clock advance changes
+    /// nothing but the stamps of the replica's later operations (a join reads no clock), so the model takes it
+    /// only together with the operation it precedes: a separate advance action would add the states "advanced,
+    /// next operation not yet made", each equal to a state already there but for the unread clock.
+    AdvanceThenOp(OpChoice),
     /// Announce the replica's applied operations to the peer with this index.
     Announce(usize),
 }
@@ -283,6 +288,8 @@ pub struct Issued {
     pub record: Arc<OpRecord>,
     /// [`Delta::encode`] of its delta.
     pub bytes: Bytes,
+    /// A hash of `bytes` (the oracle cache's key is made of these).
+    pub bytes_hash: u64,
 }
 
 /// A value the model keeps beside its state but out of its identity (it follows from the hashed fields).
@@ -300,7 +307,11 @@ impl<T> Hash for Derived<T> {
 }
 
 /// One replica's state in the model.
-#[derive(Clone, PartialEq, Eq, Hash)]
+///
+/// Its [`Hash`] (the checker fingerprints every state it generates, to know whether it was seen) takes the
+/// replica through [`ReplicaHashes::whole`], computed once when the replica changes, rather than walking the
+/// replica's maps again for every fingerprint of every state that holds it; equality still compares the replicas.
+#[derive(Clone, PartialEq, Eq)]
 pub struct ReplicaState {
     /// The real replica.
     pub replica: Replica,
@@ -324,6 +335,48 @@ pub struct ReplicaState {
     pub events_incomplete: Vec<String>,
     /// The replica's visible graph (a function of the replica).
     pub graph: Derived<Arc<VisibleGraph>>,
+    /// Hashes of the replica (a function of the replica).
+    pub hashes: Derived<ReplicaHashes>,
+}
+
+/// Hashes of a replica, computed once per change of the replica.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReplicaHashes {
+    /// [`Replica`]'s own [`Hash`]: everything it holds.
+    pub whole: u64,
+    /// What it replicates ([`properties::crdt_fingerprint`]).
+    pub crdt: u64,
+}
+
+impl ReplicaHashes {
+    fn of(replica: &Replica) -> ReplicaHashes {
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        replica.hash(&mut hasher);
+        ReplicaHashes { whole: hasher.finish(), crdt: properties::crdt_fingerprint(replica) }
+    }
+}
+
+impl Hash for ReplicaState {
+    fn hash<H: Hasher>(&self, state: &mut H) {
+        // Every field but the replica (hashed through `hashes.whole`) and what follows from it.
+        let ReplicaState {
+            replica: _,
+            now_ns,
+            issued,
+            seen,
+            ops_done,
+            ticks_done,
+            syncs_done,
+            refused,
+            damaged_accepted,
+            events_incomplete,
+            graph: _,
+            hashes,
+        } = self;
+        hashes.0.whole.hash(state);
+        (now_ns, issued, seen, ops_done, ticks_done, syncs_done).hash(state);
+        (refused, damaged_accepted, events_incomplete).hash(state);
+    }
 }
 
 impl std::fmt::Debug for ReplicaState {
@@ -352,7 +405,7 @@ impl std::fmt::Debug for ReplicaState {
 
 impl ReplicaState {
     /// After the replica changed: checks that the change events it queued turn the previous visible graph into
-    /// the new one, and keeps the new one.
+    /// the new one, and keeps the new one and the new hashes.
     fn after_step(&mut self, step: impl FnOnce() -> String) {
         let events = self.replica.drain_changes();
         let graph = Arc::new(self.replica.visible_graph());
@@ -360,6 +413,13 @@ impl ReplicaState {
             self.events_incomplete.push(format!("{}: {why}", step()));
         }
         self.graph = Derived(graph);
+        self.rehash();
+    }
+
+    /// Recomputes the replica's hashes: after anything that may have changed the replica (a refused join too,
+    /// since a planted bug may change it anyway).
+    fn rehash(&mut self) {
+        self.hashes = Derived(ReplicaHashes::of(&self.replica));
     }
 }
 
@@ -504,18 +564,15 @@ impl ReplicaActor {
                 None => {}
             }
         }
-        let mut choices: Vec<Choice> = menu.into_iter().map(Choice::Op).collect();
+        let mut choices: Vec<Choice> = Vec::with_capacity(menu.len() * 2);
         if self.config.ticks > 0 {
-            choices.push(Choice::Tick);
+            choices.extend(menu.iter().cloned().map(Choice::AdvanceThenOp));
         }
+        choices.extend(menu.into_iter().map(Choice::Op));
         if self.config.syncs > 0 {
             choices.extend((0..self.config.replicas).filter(|&peer| peer != self.index).map(Choice::Announce));
         }
         choices
-    }
-
-    fn offer(&self, state: &ReplicaState, o: &mut Out<Self>) {
-        o.choose_random("choice", self.menu(state));
     }
 
     /// Performs a chosen operation on the real replica.
@@ -601,7 +658,9 @@ impl ReplicaActor {
         for &peer in &self.peers {
             self.send_delta(peer, op.id, &bytes, o);
         }
-        state.issued.push(Issued { record: op, bytes });
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        bytes.hash(&mut hasher);
+        state.issued.push(Issued { record: op, bytes, bytes_hash: hasher.finish() });
     }
 
     /// Joins received bytes (a delta or a snapshot); returns whether they were accepted.
@@ -616,6 +675,7 @@ impl ReplicaActor {
             }
             Err(error) => {
                 state.refused.push(format!("{what}: {error}"));
+                state.rehash();
                 false
             }
         }
@@ -629,7 +689,7 @@ impl Actor for ReplicaActor {
     type Random = Choice;
     type Storage = ();
 
-    fn on_start(&self, _id: Id, _storage: &Option<()>, o: &mut Out<Self>) -> ReplicaState {
+    fn on_start(&self, _id: Id, _storage: &Option<()>, _o: &mut Out<Self>) -> ReplicaState {
         let mut replica = Replica::new(self.replica_id());
         let max_deltas = if self.config.keeps_history() { self.config.history } else { 0 };
         // Without loss or announces nothing is ever re-sent, so the history would only multiply states.
@@ -639,6 +699,7 @@ impl Actor for ReplicaActor {
         replica.apply(&self.seed.snapshot).expect("the seed graph applies");
         replica.set_change_tracking(true);
         let graph = Arc::new(replica.visible_graph());
+        let hashes = ReplicaHashes::of(&replica);
         let state = ReplicaState {
             replica,
             now_ns: 0,
@@ -651,8 +712,8 @@ impl Actor for ReplicaActor {
             damaged_accepted: Vec::new(),
             events_incomplete: Vec::new(),
             graph: Derived(graph),
+            hashes: Derived(hashes),
         };
-        self.offer(&state, o);
         state
     }
 
@@ -660,9 +721,10 @@ impl Actor for ReplicaActor {
         let state = state.to_mut();
         match choice {
             Choice::Op(op) => self.operate(state, op, o),
-            Choice::Tick => {
+            Choice::AdvanceThenOp(op) => {
                 state.now_ns += TICK_NS;
                 state.ticks_done += 1;
+                self.operate(state, op, o);
             }
             Choice::Announce(peer) => {
                 state.syncs_done += 1;
@@ -670,7 +732,6 @@ impl Actor for ReplicaActor {
                 o.send(Id::from(*peer), Msg::Announce { applied, seen: state.seen.clone() });
             }
         }
-        self.offer(state, o);
     }
 
     fn on_msg(&self, _id: Id, state: &mut Cow<'_, ReplicaState>, src: Id, msg: Msg, o: &mut Out<Self>) {
@@ -680,7 +741,6 @@ impl Actor for ReplicaActor {
                 if self.join_bytes(state, &format!("delta of op {op}"), &bytes) {
                     state.seen.insert(op);
                 }
-                self.offer(state, o);
             }
             Msg::Damaged { op, bytes } => {
                 // Refused by the decoder: nothing changes (and the state is not even copied).
@@ -714,7 +774,6 @@ impl Actor for ReplicaActor {
                 if self.join_bytes(state, "snapshot", &bytes) {
                     state.seen.extend(seen);
                 }
-                self.offer(state, o);
             }
         }
     }
@@ -750,16 +809,26 @@ impl Model for ConvergenceModel {
         self.inner.init_states()
     }
 
+    /// The network's deliveries (Stateright's own actions: the replicas register no random choices with it),
+    /// then each replica's menu within the budgets left. The menu is a function of the replica's state, so it is
+    /// computed here, per state explored, rather than stored in every state and hashed with it.
     fn actions(&self, state: &State, actions: &mut Vec<Self::Action>) {
         self.inner.actions(state, actions);
         let config = &self.inner.cfg.config;
         let (ops, ticks, syncs) = spent(state);
-        actions.retain(|action| match action {
-            ActorModelAction::SelectRandom { random: Choice::Op(_), .. } => ops < config.ops,
-            ActorModelAction::SelectRandom { random: Choice::Tick, .. } => ticks < config.ticks,
-            ActorModelAction::SelectRandom { random: Choice::Announce(_), .. } => syncs < config.syncs,
-            _ => true,
-        });
+        for (index, actor) in self.inner.actors.iter().enumerate() {
+            let allowed = |choice: &Choice| match choice {
+                Choice::Op(_) => ops < config.ops,
+                Choice::AdvanceThenOp(_) => ops < config.ops && ticks < config.ticks,
+                Choice::Announce(_) => syncs < config.syncs,
+            };
+            let menu = actor.menu(&state.actor_states[index]).into_iter().filter(allowed);
+            actions.extend(menu.map(|random| ActorModelAction::SelectRandom {
+                actor: Id::from(index),
+                key: CHOICE_KEY.to_owned(),
+                random,
+            }));
+        }
     }
 
     fn next_state(&self, state: &State, action: Self::Action) -> Option<State> {

@@ -5,9 +5,9 @@
 use std::collections::hash_map::DefaultHasher;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::hash::{Hash, Hasher};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-use bytes::Bytes;
 use dsr::{Delta, Missing, NodeId, Replica, ReplicaId, VisibleGraph};
 
 use super::{ConvergenceConfig, ConvergenceModel, Issued, Msg, NetworkKind, Seed, State, spent};
@@ -64,9 +64,12 @@ struct Oracle {
 /// Fresh replicas computed so far, by the deltas joined (many states share a set of deltas).
 #[derive(Default)]
 struct OracleCache {
-    by_deltas: Mutex<HashMap<Vec<Bytes>, Arc<Oracle>>>,
+    /// Keyed by the hashes of the deltas' bytes ([`Issued::bytes_hash`]), in the order the state lists them.
+    by_deltas: Mutex<HashMap<Vec<u64>, Arc<Oracle>>>,
     /// Late-join checks done, by the fingerprint of the replica whose snapshot was installed.
     installs: Mutex<HashMap<u64, Option<String>>>,
+    /// Whether [`conflicts_happen`] has had its witness.
+    conflict_witnessed: AtomicBool,
 }
 
 /// Most entries kept in each cache before it is emptied (a bound on memory, not on correctness).
@@ -125,7 +128,7 @@ impl Setup {
             .flat_map(|s| s.issued.iter())
             .filter(|issued| seen.contains(&issued.record.id))
             .collect();
-        let key: Vec<Bytes> = issued.iter().map(|issued| issued.bytes.clone()).collect();
+        let key: Vec<u64> = issued.iter().map(|issued| issued.bytes_hash).collect();
         if let Some(found) = self.cache.by_deltas.lock().expect("cache lock").get(&key) {
             return Arc::clone(found);
         }
@@ -293,7 +296,7 @@ pub(super) fn equal_to_fresh_join(model: &ConvergenceModel, state: &State) -> bo
     state.actor_states.iter().all(|s| {
         let oracle = model.inner.cfg.oracle(state, &s.seen);
         oracle.join_problem.is_none()
-            && oracle.fingerprint == crdt_fingerprint(&s.replica)
+            && oracle.fingerprint == s.hashes.0.crdt
             && oracle.graph == *s.graph.0
     })
 }
@@ -307,7 +310,7 @@ pub(super) fn matches_spec_everywhere(model: &ConvergenceModel, state: &State) -
 
 pub(super) fn late_joiner_equals(model: &ConvergenceModel, state: &State) -> bool {
     state.actor_states.iter().all(|s| {
-        let key = crdt_fingerprint(&s.replica);
+        let key = s.hashes.0.crdt;
         if let Some(verdict) = model.inner.cfg.cache.installs.lock().expect("cache lock").get(&key) {
             return verdict.is_none();
         }
@@ -416,13 +419,23 @@ pub(super) fn kinematics_agree(_: &ConvergenceModel, state: &State) -> bool {
 }
 
 pub(super) fn conflicts_happen(model: &ConvergenceModel, state: &State) -> bool {
+    // Stateright evaluates a `sometimes` property on every state even after its first witness, and keeps the first
+    // witness it was given; this one builds a causal order per state, so once witnessed it is not computed again.
+    let witnessed = &model.inner.cfg.cache.conflict_witnessed;
+    if witnessed.load(Ordering::Relaxed) {
+        return false;
+    }
     let ops = all_ops(&model.inner.cfg, state);
     let order = spec::CausalOrder::new(&ops);
-    ops.iter().enumerate().any(|(i, a)| {
+    let found = ops.iter().enumerate().any(|(i, a)| {
         ops[i + 1..]
             .iter()
             .any(|b| a.replica != b.replica && order.concurrent(a.id, b.id) && spec::conflict(&a.kind, &b.kind))
-    })
+    });
+    if found {
+        witnessed.store(true, Ordering::Relaxed);
+    }
+    found
 }
 
 pub(super) fn rt_moved(model: &ConvergenceModel, state: &State) -> bool {
