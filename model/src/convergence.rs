@@ -9,8 +9,11 @@
 //! translation and rotation (three dots), move it (write its translation) and delete it, write and remove `level`
 //! on seed and inserted elements.
 //! `--ops K` is the total operation budget shared by all replicas (the checker decides who spends it). With
-//! `--ticks T` the checker may also advance a replica's physical clock (by [`TICK_NS`]), so clocks skew between
-//! replicas and hybrid-logical-clock stamps, not only counters, decide the winners; with `--syncs S` a replica may
+//! `--ticks T` (default 1) the checker may also advance a replica's physical clock (by [`TICK_NS`]) just before one
+//! of its operations, so clocks skew between replicas and hybrid-logical-clock stamps, not only counters, decide the
+//! winners (an advance changes nothing until the replica's next operation reads the clock, so the model takes the
+//! two as one step: the states "advanced, not yet operated" would differ from others only in an unread clock); with
+//! `--syncs S` a replica may
 //! announce its applied operations to a peer, which answers with the deltas it lacks or, when its small history
 //! (`--history`) does not reach back far enough, a snapshot.
 //!
@@ -95,7 +98,8 @@ pub struct ConvergenceConfig {
     pub replicas: usize,
     /// Total operation budget, shared by all replicas.
     pub ops: usize,
-    /// Clock advances of [`TICK_NS`], shared by all replicas.
+    /// Clock advances of [`TICK_NS`], shared by all replicas, each taken just before one of the replica's
+    /// operations.
     pub ticks: usize,
     /// Anti-entropy announces (a replica's applied operations to one peer), shared by all replicas.
     pub syncs: usize,
@@ -118,7 +122,7 @@ impl Default for ConvergenceConfig {
         ConvergenceConfig {
             replicas: 3,
             ops: 3,
-            ticks: 0,
+            ticks: 1,
             syncs: 0,
             history: 1,
             network: NetworkKind::UnorderedNonduplicating,

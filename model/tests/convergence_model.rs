@@ -13,16 +13,22 @@ fn check(config: ConvergenceConfig) -> CheckReport {
     report
 }
 
+/// A configuration without clock advances.
 fn config(replicas: usize, ops: usize, network: NetworkKind) -> ConvergenceConfig {
-    ConvergenceConfig { replicas, ops, network, ..ConvergenceConfig::default() }
+    ConvergenceConfig { replicas, ops, network, ticks: 0, ..ConvergenceConfig::default() }
 }
 
+/// The default `cortex check convergence`. Its states include every state of 3 replicas x 3 operations without a
+/// clock advance (835,425 unique), since the one advance is optional. Not run again in the test command's
+/// `--features mutants` pass, which plants no mutant here and would only repeat it.
 #[test]
-fn three_replicas_three_ops_the_default_check_converge_and_match_the_spec_in_every_state() {
+#[cfg(not(feature = "mutants"))]
+fn three_replicas_three_ops_one_clock_advance_the_default_check_converge_and_match_the_spec_in_every_state() {
     let report = check(ConvergenceConfig::default());
     assert_eq!(report.configuration["replicas"], 3);
     assert_eq!(report.configuration["ops"], 3);
-    assert_eq!(report.unique_states, 835_425);
+    assert_eq!(report.configuration["ticks"], 1);
+    assert_eq!(report.unique_states, 3_333_153);
 }
 
 #[test]
@@ -56,14 +62,14 @@ fn snapshots_answer_when_there_is_no_history() {
 #[test]
 fn skewed_clocks_decide_the_winners_and_stamps_still_follow_causality() {
     let skewed = ConvergenceConfig { ticks: 1, ..config(2, 3, NetworkKind::UnorderedNonduplicating) };
-    assert_eq!(check(skewed).unique_states, 176_551);
+    assert_eq!(check(skewed).unique_states, 117_373);
 }
 
 #[test]
 fn everything_at_once_on_a_duplicating_network() {
     // A clock advance, an announce with a history of one, and truncated copies of every delta.
     let all = ConvergenceConfig { ticks: 1, syncs: 1, history: 1, ..config(2, 2, NetworkKind::UnorderedDuplicating) };
-    assert_eq!(check(all).unique_states, 127_935);
+    assert_eq!(check(all).unique_states, 76_669);
 }
 
 #[test]

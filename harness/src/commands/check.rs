@@ -78,8 +78,9 @@ struct ConvergenceArgs {
     /// unordered-duplicating, unordered-nonduplicating or lossy.
     #[arg(long, default_value = "unordered-nonduplicating", value_parser = parse_network)]
     network: NetworkKind,
-    /// Clock advances (each moves one replica's physical clock ahead), shared by all replicas.
-    #[arg(long, default_value_t = 0)]
+    /// Clock advances (each moves one replica's physical clock ahead just before one of its operations), shared
+    /// by all replicas.
+    #[arg(long, default_value_t = 1)]
     ticks: usize,
     /// Anti-entropy announces (a replica's applied operations to one peer, answered with deltas or a
     /// snapshot), shared by all replicas.

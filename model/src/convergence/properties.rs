@@ -295,9 +295,7 @@ pub(super) fn same_ops_same_graph(_: &ConvergenceModel, state: &State) -> bool {
 pub(super) fn equal_to_fresh_join(model: &ConvergenceModel, state: &State) -> bool {
     state.actor_states.iter().all(|s| {
         let oracle = model.inner.cfg.oracle(state, &s.seen);
-        oracle.join_problem.is_none()
-            && oracle.fingerprint == s.hashes.0.crdt
-            && oracle.graph == *s.graph.0
+        oracle.join_problem.is_none() && oracle.fingerprint == s.hashes.0.crdt && oracle.graph == *s.graph.0
     })
 }
 
