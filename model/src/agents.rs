@@ -57,6 +57,10 @@ pub struct AgentsConfig {
     pub budgets: Budgets,
     /// History kept for anti-entropy (small, so answers fall back to snapshots).
     pub history: usize,
+    /// Agents per announce group ([`agent::config::AgentConfig::announce_group`]): with fewer than there are
+    /// agents, each agent stretches its periodic announce to `period × ⌈agents / group⌉` once it has heard its
+    /// peers, as the running agents of a large group do.
+    pub announce_group: u32,
     /// A planted protocol bug (with the `mutants` feature).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mutant: Option<String>,
@@ -72,6 +76,7 @@ impl Default for AgentsConfig {
             agents: 2,
             budgets: Budgets { writes: 2, losses: 1, duplicates: 0, crashes: 1, cuts: 1, ticks: 4 },
             history: 2,
+            announce_group: agent::config::DEFAULT_ANNOUNCE_GROUP,
             mutant: None,
             #[cfg(feature = "mutants")]
             planted: None,
@@ -106,9 +111,9 @@ impl AgentsConfig {
             join_wait_ns: if index == 0 { 0 } else { JOIN_WAIT_NS },
             join_retry_ns: RETRY_NS,
             announce_period_ns: ANNOUNCE_NS,
-            // The running agents' default. The model's groups are smaller than it, so every agent announces every
-            // period: a larger group only stretches the periodic announce (`AgentCore::announce_interval_ns`).
-            announce_group: agent::config::DEFAULT_ANNOUNCE_GROUP,
+            // The running agents' default (8) is more than the model's agents, so every agent announces every
+            // period unless the configuration sets a smaller group (`AgentCore::announce_interval_ns`).
+            announce_group: self.announce_group,
             quiet_announce_ns: ANNOUNCE_NS / 4,
             log_limits: LogLimits { max_deltas: self.history, max_payload_bytes: 1 << 20 },
             max_buffered_deltas: 16,

@@ -39,3 +39,13 @@ fn lost_writes_are_repaired() {
 fn three_agents_join_one_graph() {
     assert_eq!(check(config(3, quiet())).unique_states, 5_155);
 }
+
+#[test]
+fn a_group_of_one_stretches_the_announce_period_and_a_lost_write_is_still_repaired() {
+    // Three agents in announce groups of one: each announces every 3 periods once it has heard both peers.
+    let every_period = config(3, Budgets { losses: 1, ..quiet() });
+    let stretched = AgentsConfig { announce_group: 1, ..every_period.clone() };
+    let (stretched, every_period) = (check(stretched).unique_states, check(every_period).unique_states);
+    assert_ne!(stretched, every_period, "the group of one must change when the agents announce");
+    assert_eq!(stretched, 17_296);
+}

@@ -120,6 +120,10 @@ struct AgentsArgs {
     /// Timer ticks, shared by all agents.
     #[arg(long, default_value_t = 4)]
     ticks: usize,
+    /// Agents per announce group: with fewer than --agents, each agent announces every ⌈agents / group⌉
+    /// periods once it has heard its peers.
+    #[arg(long, default_value_t = agent::config::DEFAULT_ANNOUNCE_GROUP)]
+    announce_group: u32,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -190,6 +194,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
                     cuts: args.cuts,
                     ticks: args.ticks,
                 },
+                announce_group: args.announce_group,
                 ..Default::default()
             };
             if let Some(address) = args.common.explore {
