@@ -341,6 +341,8 @@ pub struct ReplicaState {
     pub graph: Derived<Arc<VisibleGraph>>,
     /// Hashes of the replica (a function of the replica).
     pub hashes: Derived<ReplicaHashes>,
+    /// The properties' findings on this replica state alone, each computed at most once.
+    findings: properties::ReplicaFindings,
 }
 
 /// Hashes of a replica, computed once per change of the replica.
@@ -354,9 +356,16 @@ pub struct ReplicaHashes {
 
 impl ReplicaHashes {
     fn of(replica: &Replica) -> ReplicaHashes {
+        let crdt = properties::crdt_fingerprint(replica);
+        // Beyond what it replicates, a replica holds its id (fixed by its place in the system state), the count of
+        // node ids it minted (fixed by its own operations, which the state holds) and its history of deltas: with
+        // no history (the configurations without loss or announces) the replicated part identifies it.
+        if replica.log_len() == 0 {
+            return ReplicaHashes { whole: crdt, crdt };
+        }
         let mut hasher = std::collections::hash_map::DefaultHasher::new();
         replica.hash(&mut hasher);
-        ReplicaHashes { whole: hasher.finish(), crdt: properties::crdt_fingerprint(replica) }
+        ReplicaHashes { whole: hasher.finish(), crdt }
     }
 }
 
@@ -376,6 +385,7 @@ impl Hash for ReplicaState {
             events_incomplete,
             graph: _,
             hashes,
+            findings: _,
         } = self;
         hashes.0.whole.hash(state);
         (now_ns, issued, seen, ops_done, ticks_done, syncs_done).hash(state);
@@ -717,6 +727,7 @@ impl Actor for ReplicaActor {
             events_incomplete: Vec::new(),
             graph: Derived(graph),
             hashes: Derived(hashes),
+            findings: properties::ReplicaFindings::default(),
         };
         state
     }

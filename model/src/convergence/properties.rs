@@ -6,7 +6,7 @@ use std::collections::hash_map::DefaultHasher;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::hash::{Hash, Hasher};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use dsr::{Delta, Missing, NodeId, Replica, ReplicaId, VisibleGraph};
 
@@ -47,6 +47,32 @@ pub const SNAPSHOT: &str = "an announce is answered with a snapshot (when announ
 pub const RT_MOVED: &str = "an RT edge's translation is written after its insert (with 3 operations or more)";
 /// The quiescent end is reached (the quiescent properties are not vacuous).
 pub const END: &str = "a quiescent state with the budget spent is reached";
+
+/// The properties' findings on one replica state alone (its invariants, its oracle, its late join, its
+/// kinematics), each computed at most once. A replica state is shared, behind an `Arc`, by every system state that
+/// holds it unchanged, so these are computed once for all of them rather than once per system state. They are
+/// functions of the replica state and of the deltas of the operations it has seen, which never change once issued.
+/// A copy starts empty: the model copies a replica state only to change it.
+#[derive(Default)]
+pub(super) struct ReplicaFindings {
+    invariants: OnceLock<bool>,
+    oracle: OnceLock<Arc<Oracle>>,
+    late_join: OnceLock<bool>,
+    poses: OnceLock<bool>,
+    transforms: OnceLock<Vec<Result<[f64; 3], String>>>,
+}
+
+impl Clone for ReplicaFindings {
+    fn clone(&self) -> Self {
+        ReplicaFindings::default()
+    }
+}
+impl PartialEq for ReplicaFindings {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+impl Eq for ReplicaFindings {}
 
 /// What a fresh replica that joins a set of deltas looks like, and whether the specification agrees.
 #[derive(Debug)]
@@ -253,8 +279,10 @@ pub(super) fn invariants_hold(model: &ConvergenceModel, state: &State) -> bool {
         })
         .collect();
     state.actor_states.iter().all(|s| {
-        s.replica.check_invariants().is_ok()
-            && deleted.iter().all(|(op, id)| !s.seen.contains(op) || s.replica.node(*id).is_none())
+        *s.findings.invariants.get_or_init(|| {
+            s.replica.check_invariants().is_ok()
+                && deleted.iter().all(|(op, id)| !s.seen.contains(op) || s.replica.node(*id).is_none())
+        })
     })
 }
 
@@ -292,34 +320,43 @@ pub(super) fn same_ops_same_graph(_: &ConvergenceModel, state: &State) -> bool {
     })
 }
 
+/// The oracle of a replica state: a fresh replica joining the deltas of the operations it has seen.
+fn oracle_of<'a>(model: &ConvergenceModel, state: &State, s: &'a super::ReplicaState) -> &'a Oracle {
+    s.findings.oracle.get_or_init(|| model.inner.cfg.oracle(state, &s.seen))
+}
+
 pub(super) fn equal_to_fresh_join(model: &ConvergenceModel, state: &State) -> bool {
     state.actor_states.iter().all(|s| {
-        let oracle = model.inner.cfg.oracle(state, &s.seen);
+        let oracle = oracle_of(model, state, s);
         oracle.join_problem.is_none() && oracle.fingerprint == s.hashes.0.crdt && oracle.graph == *s.graph.0
     })
 }
 
 pub(super) fn matches_spec_everywhere(model: &ConvergenceModel, state: &State) -> bool {
     state.actor_states.iter().all(|s| {
-        let oracle = model.inner.cfg.oracle(state, &s.seen);
+        let oracle = oracle_of(model, state, s);
         oracle.spec_problem.is_none() && oracle.graph == *s.graph.0
     })
 }
 
 pub(super) fn late_joiner_equals(model: &ConvergenceModel, state: &State) -> bool {
-    state.actor_states.iter().all(|s| {
-        let key = s.hashes.0.crdt;
-        if let Some(verdict) = model.inner.cfg.cache.installs.lock().expect("cache lock").get(&key) {
-            return verdict.is_none();
-        }
-        let verdict = late_join_problem(&model.inner.cfg, &s.replica, &s.graph.0);
-        let mut cache = model.inner.cfg.cache.installs.lock().expect("cache lock");
-        if cache.len() >= CACHE_LIMIT {
-            cache.clear();
-        }
-        cache.insert(key, verdict.clone());
-        verdict.is_none()
-    })
+    state.actor_states.iter().all(|s| *s.findings.late_join.get_or_init(|| late_joiner_verdict(model, s)))
+}
+
+/// Whether a late joiner installing `s`'s snapshot equals it, cached by the replica's fingerprint too (replica
+/// states on different paths can hold one replica).
+fn late_joiner_verdict(model: &ConvergenceModel, s: &super::ReplicaState) -> bool {
+    let key = s.hashes.0.crdt;
+    if let Some(verdict) = model.inner.cfg.cache.installs.lock().expect("cache lock").get(&key) {
+        return verdict.is_none();
+    }
+    let verdict = late_join_problem(&model.inner.cfg, &s.replica, &s.graph.0);
+    let mut cache = model.inner.cfg.cache.installs.lock().expect("cache lock");
+    if cache.len() >= CACHE_LIMIT {
+        cache.clear();
+    }
+    cache.insert(key, verdict.clone());
+    verdict.is_none()
 }
 
 /// Installs `replica`'s encoded snapshot into a fresh replica (with the same planted mutant) and compares.
@@ -404,15 +441,18 @@ fn rt_edges_match_shown_poses(replica: &Replica, graph: &VisibleGraph) -> bool {
     })
 }
 
+/// Every visible node's frame mapped into every other's by `s`'s replica, computed once per replica state.
+fn transforms_of(s: &super::ReplicaState) -> &[Result<[f64; 3], String>] {
+    s.findings.transforms.get_or_init(|| transforms(&s.replica, &s.graph.0))
+}
+
 pub(super) fn kinematics_agree(_: &ConvergenceModel, state: &State) -> bool {
     let replicas = &state.actor_states;
-    let each = replicas.iter().all(|s| rt_edges_match_shown_poses(&s.replica, &s.graph.0));
+    let each =
+        replicas.iter().all(|s| *s.findings.poses.get_or_init(|| rt_edges_match_shown_poses(&s.replica, &s.graph.0)));
     each && (0..replicas.len()).all(|a| {
-        (a + 1..replicas.len()).all(|b| {
-            replicas[a].seen != replicas[b].seen
-                || transforms(&replicas[a].replica, &replicas[a].graph.0)
-                    == transforms(&replicas[b].replica, &replicas[b].graph.0)
-        })
+        (a + 1..replicas.len())
+            .all(|b| replicas[a].seen != replicas[b].seen || transforms_of(&replicas[a]) == transforms_of(&replicas[b]))
     })
 }
 
