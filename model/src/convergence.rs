@@ -714,7 +714,7 @@ impl Actor for ReplicaActor {
         replica.set_change_tracking(true);
         let graph = Arc::new(replica.visible_graph());
         let hashes = ReplicaHashes::of(&replica);
-        let state = ReplicaState {
+        ReplicaState {
             replica,
             now_ns: 0,
             issued: Vec::new(),
@@ -728,8 +728,7 @@ impl Actor for ReplicaActor {
             graph: Derived(graph),
             hashes: Derived(hashes),
             findings: properties::ReplicaFindings::default(),
-        };
-        state
+        }
     }
 
     fn on_random(&self, _id: Id, state: &mut Cow<'_, ReplicaState>, choice: &Choice, o: &mut Out<Self>) {
