@@ -21,6 +21,10 @@ use transport::rtps::RtpsConfig;
 /// Arguments of `cortex inspect`.
 #[derive(Debug, Args)]
 pub struct InspectArgs {
+    /// The graph to inspect (1 to 16 hex digits; see `cortex agent --graph-id`). Without it, the graph of the first
+    /// agent that answers.
+    #[arg(long)]
+    pub graph_id: Option<agent::GraphId>,
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
@@ -68,6 +72,7 @@ pub fn run(args: InspectArgs) -> Result<()> {
     }
     let agent = super::agent::start_rtps_agent(
         args.id,
+        args.graph_id,
         args.join_wait_ms,
         args.seed_json.as_deref(),
         RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() },

@@ -76,6 +76,9 @@ impl Proc {
             .arg("chaos-agent")
             .args(["--id", &slot.to_string(), "--domain", &launch.domain.to_string()])
             .args(["--join-wait-ms", &launch.join_wait_ms.to_string()])
+            // One graph, named: a life that starts alone (a restart with no reachable peer, a late join across a
+            // partition) is still of the campaign's graph.
+            .args(["--graph-id", &agent::GraphId::from_nonce(u64::from(launch.domain)).to_string()])
             .args(["--status-ms", &launch.status_ms.to_string()])
             .args(["--image-bytes", &launch.image_bytes.to_string()])
             .arg("--life-file")

@@ -28,6 +28,9 @@ pub struct ChaosAgentArgs {
     /// Topic name prefix.
     #[arg(long, default_value = "dsr")]
     pub topic_prefix: String,
+    /// The graph the agent belongs to (see `cortex agent --graph-id`).
+    #[arg(long)]
+    pub graph_id: Option<agent::GraphId>,
     /// The incarnation record of this agent (kept across its restarts).
     #[arg(long)]
     pub life_file: PathBuf,
@@ -66,6 +69,7 @@ pub fn run(args: ChaosAgentArgs) -> Result<()> {
     let mut config = AgentConfig::new(AgentId(args.id));
     config.join_wait = Duration::from_millis(args.join_wait_ms);
     config.life_file = Some(args.life_file.clone());
+    config.graph = args.graph_id;
     #[cfg(feature = "mutants")]
     if let Some(name) = &args.plant {
         config.plant = agent::mutants::Plant::of(Some(protocol_mutant(name)?));
