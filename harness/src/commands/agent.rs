@@ -51,6 +51,11 @@ pub struct AgentArgs {
     /// (starting alone) a new graph with a random id. The id is in `--json-status` (`graph`).
     #[arg(long)]
     pub graph_id: Option<GraphId>,
+    /// Join with DDS Security, with the credentials in this directory (`DIR/NAME` of `cortex security init`):
+    /// authenticated, access-controlled and protected as its governance and permissions say. Checked before
+    /// joining (files, CA signature, expiry).
+    #[arg(long)]
+    pub security: Option<PathBuf>,
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
@@ -213,8 +218,20 @@ pub fn start_rtps_agent(
     agent::rtps::start(config, rtps, faults).context("joining the DDS domain")
 }
 
+/// The transport's DDS Security settings for the credentials in `dir`, checked first
+/// ([`super::security::check_credentials`]).
+///
+/// # Errors
+/// Missing, unreadable, wrongly signed, expired or not yet valid credentials (the message names the file).
+pub fn security_files(dir: Option<&std::path::Path>) -> Result<Option<transport::rtps::SecurityFiles>> {
+    let Some(dir) = dir else { return Ok(None) };
+    super::security::check_credentials(dir).context("--security")?;
+    Ok(Some(transport::rtps::SecurityFiles { dir: dir.to_path_buf() }))
+}
+
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
+    let security = security_files(args.security.as_deref())?;
     let agent = start_rtps_agent(
         args.id,
         args.graph_id,
@@ -224,6 +241,7 @@ pub fn run(args: AgentArgs) -> Result<()> {
             domain_id: args.domain,
             topic_prefix: args.topic_prefix.clone(),
             updates: args.updates.into(),
+            security,
             ..RtpsConfig::default()
         },
         args.faults,
