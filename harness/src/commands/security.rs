@@ -98,7 +98,12 @@ pub struct CheckArgs {
 /// Runs `cortex security`.
 pub fn run(args: SecurityArgs) -> Result<()> {
     match args.command {
-        SecurityCommand::Init(args) => init(&args),
+        SecurityCommand::Init(args) => {
+            for line in init(&args)? {
+                println!("{line}");
+            }
+            Ok(())
+        }
         SecurityCommand::Check(args) => {
             let summary = check_credentials(&args.dir)?;
             println!("{}: {summary}", args.dir.display());
@@ -264,7 +269,12 @@ fn valid_name(name: &str) -> bool {
     !name.is_empty() && name != "ca" && name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
 }
 
-fn init(args: &InitArgs) -> Result<()> {
+/// Creates the PKI `args` describe; returns one line per directory made (what it may do).
+///
+/// # Errors
+/// A bad participant name or topic prefix, an existing PKI in the directory, or a file that cannot be written.
+pub fn init(args: &InitArgs) -> Result<Vec<String>> {
+    let mut made = Vec::new();
     let names: Vec<(&String, bool)> =
         args.agents.iter().map(|n| (n, true)).chain(args.readers.iter().map(|n| (n, false))).collect();
     for (name, _) in &names {
@@ -310,10 +320,31 @@ fn init(args: &InitArgs) -> Result<()> {
         write(&dir.join("permissions.p7s"), &smime_signed(&ca, &permissions_xml)?)?;
         let role = if may_publish { "publish and subscribe" } else { "subscribe only" };
         let expired = if args.expired.contains(name) { ", EXPIRED" } else { "" };
-        println!("{}: {role} on {topics}{expired}", dir.display());
+        made.push(format!("{}: {role} on {topics}{expired}", dir.display()));
     }
-    println!("{}: the CA (identity and permissions), governance ({:?})", ca_dir.display(), args.protection);
-    Ok(())
+    made.push(format!("{}: the CA (identity and permissions), governance ({:?})", ca_dir.display(), args.protection));
+    Ok(made)
+}
+
+/// A fresh two-participant PKI (`bench-a`, `bench-b`; submessages encrypted) in a new directory under the system's
+/// temporary directory, for a protected benchmark: the credentials of its two sides.
+///
+/// # Errors
+/// As [`init`].
+pub fn bench_credentials() -> Result<measure::bench::Credentials> {
+    let dir = std::env::temp_dir().join(format!("cortex-bench-pki-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let args = InitArgs {
+        dir: dir.clone(),
+        agents: vec!["bench-a".into(), "bench-b".into()],
+        readers: Vec::new(),
+        expired: Vec::new(),
+        topic_prefix: "*".into(),
+        protection: Protection::Encrypt,
+        days: 2,
+    };
+    init(&args)?;
+    Ok(measure::bench::Credentials { this: dir.join("bench-a"), helper: dir.join("bench-b") })
 }
 
 /// Checks the credentials in `dir` as an agent does before it joins: every file present, the identity
