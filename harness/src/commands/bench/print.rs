@@ -68,7 +68,9 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
 
 fn rtt_socket(result: &RttResult) {
     for run in &result.runs {
-        for (who, f) in [("agent (discovery + join)", &run.agent), ("raw rustdds (discovery)", &run.raw)] {
+        let secured = run.secured.as_ref().map(|f| ("agent with DDS Security (discovery + handshake + join)", f));
+        let loops = [("agent (discovery + join)", &run.agent), ("raw rustdds (discovery)", &run.raw)];
+        for (who, f) in loops.into_iter().chain(secured) {
             if let Some(s) = &f.socket {
                 println!(
                     "{who}, {}: {} B in {} packets before the first echo; steady state {} B in {} packets \
