@@ -381,9 +381,13 @@ impl AgentCore {
             }
             Input::GraphAnswer { nonce, snapshot, .. } => {
                 if nonce == self.life.nonce && self.replica.is_none() {
-                    // The first answer names the graph of a joiner that named none.
-                    self.graph = self.graph.or(graph);
+                    // The first answer names the graph of a joiner that named none (unless it is refused).
+                    let named = self.graph;
+                    self.graph = named.or(graph);
                     self.become_ready(now_ns, Some(snapshot), &mut out);
+                    if self.replica.is_none() {
+                        self.graph = named;
+                    }
                 }
             }
         }
