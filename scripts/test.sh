@@ -6,6 +6,8 @@
 # and the scheduler once more with `--features mutants`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# DDS Security's OpenSSL is built from source: it needs perl (with its core modules) and make.
+bash scripts/build-deps.sh
 # The inspector's browser test (impl/inspector/tests/browser.rs) drives Debian's chromium through chromedriver.
 if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
   if [ "$(id -u)" = 0 ]; then

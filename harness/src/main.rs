@@ -36,6 +36,8 @@ enum Command {
     Bench(commands::bench::BenchArgs),
     /// Live bridges between the graph and other middleware: `bridge ros2 --config FILE.toml`.
     Bridge(commands::bridge::BridgeArgs),
+    /// DDS Security: `security init DIR` makes a test PKI (CA, identities, governance, permissions).
+    Security(commands::security::SecurityArgs),
     /// Serve a web inspector of the live graph and the BICA debug primitives.
     Inspect(commands::inspect::InspectArgs),
     /// Run an experiment set and write a report (results.json, figures, report.md).
@@ -86,6 +88,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => commands::bench::run(args),
         Command::Bridge(args) => commands::bridge::run(args),
         Command::Inspect(args) => commands::inspect::run(args),
+        Command::Security(args) => commands::security::run(args),
         Command::Report(args) => commands::report::run(args),
         Command::MeasureReceiver(args) => commands::receiver::run(args),
         Command::ChaosAgent(args) => commands::chaos::serve::run(args),

@@ -108,6 +108,10 @@ impl AgentsConfig {
     fn protocol(&self, index: usize) -> ProtocolConfig {
         ProtocolConfig {
             id: AgentId(index as u32 + 1),
+            // Every agent names the one graph, as the agents of one deployment do (`cortex agent --graph-id`, or the
+            // graph a previous life recorded): a first life that named none and started alone under a cut would
+            // create a graph of its own, which by design never merges (`agent::core`, **Graphs**).
+            graph: Some(MODEL_GRAPH),
             join_wait_ns: if index == 0 { 0 } else { JOIN_WAIT_NS },
             join_retry_ns: RETRY_NS,
             announce_period_ns: ANNOUNCE_NS,
@@ -123,6 +127,12 @@ impl AgentsConfig {
         }
     }
 }
+
+/// The graph the model's agents belong to.
+const MODEL_GRAPH: agent::GraphId = match agent::GraphId::new(0x6d) {
+    Some(graph) => graph,
+    None => panic!("a graph id is not zero"),
+};
 
 /// One message in flight: encoded, from one agent to one agent.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -311,7 +321,7 @@ impl AgentsModel {
     /// Puts an agent's output on the network and records what it reported.
     fn emit(&self, state: &mut AgentsState, from: usize, reply_to: Option<usize>, out: &Output) {
         for send in &out.sends {
-            let bytes = send.message.encode();
+            let bytes = send.encode();
             let targets: Vec<usize> = match (send.dest, reply_to) {
                 (Dest::Sender, Some(to)) => vec![to],
                 _ => (0..state.slots.len()).filter(|&to| to != from).collect(),
@@ -373,7 +383,8 @@ impl AgentsModel {
         let to = envelope.to;
         let now = state.slots[to].now_ns;
         let Some(core) = state.slots[to].core.as_ref() else { return };
-        let Ok(message) = Message::decode(&envelope.bytes) else {
+        let Ok(agent::envelope::Envelope { graph, message }) = agent::envelope::Envelope::decode(&envelope.bytes)
+        else {
             return self.fail(state, Check::Invariants, format!("agent {to} could not decode an envelope"));
         };
         if message.to().is_some_and(|id| id != core.id()) {
@@ -395,7 +406,7 @@ impl AgentsModel {
             state.slots[to].early.insert(Dot::new(origin.replica, origin.first));
         }
         let core = state.slots[to].core.as_mut().expect("alive");
-        let out = core.handle(now, input);
+        let out = core.handle(now, graph, input);
         if gap && !out.sends.iter().any(|s| matches!(s.message, Message::MissingRequest { .. })) {
             self.fail(state, Check::GapAsked, format!("agent {to} joined a delta after a gap and asked nothing"));
         }
@@ -757,7 +768,7 @@ impl fmt::Debug for AgentsState {
             }
         }
         for envelope in &self.network {
-            let kind = Message::decode(&envelope.bytes).map(|m| m.kind()).unwrap_or("?");
+            let kind = agent::envelope::Envelope::decode(&envelope.bytes).map(|e| e.message.kind()).unwrap_or("?");
             writeln!(f, "  in flight: {kind} {} -> {}", envelope.from, envelope.to)?;
         }
         for op in &self.history {

@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use agent::rtps::AgentTransport;
-use agent::{Agent, AgentConfig, AgentId, Control};
+use agent::{Agent, AgentConfig, AgentId, Control, GraphId};
 use anyhow::{Context, Result, anyhow, bail};
 use bica::clock::ns_from_ms;
 use bica::prelude::*;
@@ -45,6 +45,17 @@ pub struct AgentArgs {
     /// Start from this CORTEX JSON graph if no running agent answers.
     #[arg(long)]
     pub seed_json: Option<PathBuf>,
+    /// The graph this agent belongs to (1 to 16 hex digits): it joins only this graph, refuses every other one on
+    /// the domain and prefix, and creates it with this id if it starts alone. Without it, the agent takes the
+    /// graph its previous life recorded in `--state-dir`, else the graph of the first agent that answers, else
+    /// (starting alone) a new graph with a random id. The id is in `--json-status` (`graph`).
+    #[arg(long)]
+    pub graph_id: Option<GraphId>,
+    /// Join with DDS Security, with the credentials in this directory (`DIR/NAME` of `cortex security init`):
+    /// authenticated, access-controlled and protected as its governance and permissions say. Checked before
+    /// joining (files, CA signature, expiry).
+    #[arg(long)]
+    pub security: Option<PathBuf>,
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
@@ -174,12 +185,14 @@ impl ValueEnum for RoleArg {
 /// Starts an agent on RTPS with the real clock ([`agent::rtps::start`]): the way `cortex agent` and `cortex
 /// inspect` join a graph, from `seed_json` if no running agent answers within `join_wait_ms`. With `faults`, what
 /// the agent receives goes through the seeded fault injector (seeded with the agent id). `life_file` is where each
-/// life records its incarnation ([`AgentConfig::life_file`]).
+/// life records its incarnation ([`AgentConfig::life_file`]); `graph` the graph it belongs to
+/// ([`AgentConfig::graph`]).
 ///
 /// # Errors
 /// An unreadable or invalid seed graph, or a DDS domain that cannot be joined.
 pub fn start_rtps_agent(
     id: u32,
+    graph: Option<GraphId>,
     join_wait_ms: u64,
     seed_json: Option<&std::path::Path>,
     rtps: RtpsConfig,
@@ -192,6 +205,7 @@ pub fn start_rtps_agent(
     let mut config = AgentConfig::new(AgentId(id));
     config.join_wait = Duration::from_millis(join_wait_ms);
     config.life_file = life_file;
+    config.graph = graph;
     if let Some(path) = seed_json {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         let reading = dsr::json::read(&bytes, dsr::json::Strictness::Lenient)
@@ -204,16 +218,30 @@ pub fn start_rtps_agent(
     agent::rtps::start(config, rtps, faults).context("joining the DDS domain")
 }
 
+/// The transport's DDS Security settings for the credentials in `dir`, checked first
+/// ([`super::security::check_credentials`]).
+///
+/// # Errors
+/// Missing, unreadable, wrongly signed, expired or not yet valid credentials (the message names the file).
+pub fn security_files(dir: Option<&std::path::Path>) -> Result<Option<transport::rtps::SecurityFiles>> {
+    let Some(dir) = dir else { return Ok(None) };
+    super::security::check_credentials(dir).context("--security")?;
+    Ok(Some(transport::rtps::SecurityFiles { dir: dir.to_path_buf() }))
+}
+
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
+    let security = security_files(args.security.as_deref())?;
     let agent = start_rtps_agent(
         args.id,
+        args.graph_id,
         args.join_wait_ms,
         args.seed_json.as_deref(),
         RtpsConfig {
             domain_id: args.domain,
             topic_prefix: args.topic_prefix.clone(),
             updates: args.updates.into(),
+            security,
             ..RtpsConfig::default()
         },
         args.faults,

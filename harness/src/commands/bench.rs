@@ -155,6 +155,10 @@ pub struct RttArgs {
     /// Deliveries of updates to compare, each measured raw and through agents, in this order.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "reliable,best-effort")]
     pub updates: Vec<UpdatesArg>,
+    /// Also through agents protected by DDS Security (a fresh test PKI, submessages encrypted with AES-GCM),
+    /// beside the unprotected ones in the same run.
+    #[arg(long)]
+    pub security: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -212,6 +216,9 @@ pub struct JoinArgs {
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
+    /// Also join with DDS Security (a fresh test PKI, submessages encrypted), after the unprotected join.
+    #[arg(long)]
+    pub security: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -235,6 +242,9 @@ pub struct EchoArgs {
     /// Delivery of updates.
     #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
     pub updates: UpdatesArg,
+    /// DDS Security credentials.
+    #[arg(long)]
+    pub security: Option<PathBuf>,
 }
 
 /// Arguments of the join helper.
@@ -249,6 +259,9 @@ pub struct JoinChildArgs {
     /// Nodes expected.
     #[arg(long)]
     pub nodes: usize,
+    /// DDS Security credentials.
+    #[arg(long)]
+    pub security: Option<PathBuf>,
 }
 
 /// Runs `cortex bench`.
@@ -257,10 +270,11 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Rtt(args) => run_rtt(args),
         BenchCommand::Join(args) => run_join(args),
         BenchCommand::Echo(args) => {
-            rtt::echo(args.domain, &args.prefix, args.raw, args.multicast.into(), args.updates.into())
+            let security = args.security.as_deref();
+            rtt::echo(args.domain, &args.prefix, args.raw, args.multicast.into(), args.updates.into(), security)
         }
         BenchCommand::JoinChild(args) => {
-            let report = join::child(args.domain, &args.prefix, args.nodes)?;
+            let report = join::child(args.domain, &args.prefix, args.nodes, args.security.as_deref())?;
             println!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
@@ -335,6 +349,7 @@ fn run_rtt(args: RttArgs) -> Result<()> {
         domain_id: args.domain,
         multicast: args.multicast.into(),
         updates: args.updates.iter().map(|&u| u.into()).collect(),
+        security: if args.security { Some(super::security::bench_credentials()?) } else { None },
     };
     let result = rtt::run(&config, &counting, &this_program()?)?;
     if args.json {
@@ -346,11 +361,26 @@ fn run_rtt(args: RttArgs) -> Result<()> {
 }
 
 fn run_join(args: JoinArgs) -> Result<()> {
-    let result = join::run(args.nodes, args.domain, &this_program()?)?;
+    let result = join::run(args.nodes, args.domain, &this_program()?, None)?;
+    let secured = if args.security {
+        let credentials = super::security::bench_credentials()?;
+        Some(join::run(args.nodes, args.domain, &this_program()?, Some(&credentials)).context("the protected join")?)
+    } else {
+        None
+    };
     if args.json {
-        println!("{}", serde_json::to_string(&result)?);
+        let json = match &secured {
+            None => serde_json::to_value(&result)?,
+            Some(secured) => serde_json::json!({ "unprotected": result, "protected": secured }),
+        };
+        println!("{json}");
     } else {
         print::join(&result);
+        if let Some(secured) = &secured {
+            println!("with DDS Security (submessages encrypted):");
+            print::join(secured);
+            print::join_ratio(&result, secured);
+        }
     }
     Ok(())
 }

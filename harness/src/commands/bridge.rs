@@ -84,6 +84,7 @@ fn run_ros2(args: Ros2Args) -> Result<()> {
     let config = BridgeConfig::load(&args.config)?;
     let agent = start_rtps_agent(
         config.agent_id,
+        None,
         args.join_wait_ms,
         args.seed_json.as_deref(),
         RtpsConfig { domain_id: config.dsr_domain, topic_prefix: config.dsr_prefix.clone(), ..RtpsConfig::default() },

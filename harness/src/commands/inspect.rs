@@ -21,6 +21,14 @@ use transport::rtps::RtpsConfig;
 /// Arguments of `cortex inspect`.
 #[derive(Debug, Args)]
 pub struct InspectArgs {
+    /// The graph to inspect (1 to 16 hex digits; see `cortex agent --graph-id`). Without it, the graph of the first
+    /// agent that answers.
+    #[arg(long)]
+    pub graph_id: Option<agent::GraphId>,
+    /// Join with DDS Security, with the credentials in this directory (see `cortex agent --security`; a
+    /// subscribe-only identity such as `inspector` of `cortex security init` sees the graph but cannot change it).
+    #[arg(long)]
+    pub security: Option<PathBuf>,
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
@@ -66,11 +74,18 @@ pub fn run(args: InspectArgs) -> Result<()> {
             args.listen
         );
     }
+    let security = super::agent::security_files(args.security.as_deref())?;
     let agent = super::agent::start_rtps_agent(
         args.id,
+        args.graph_id,
         args.join_wait_ms,
         args.seed_json.as_deref(),
-        RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() },
+        RtpsConfig {
+            domain_id: args.domain,
+            topic_prefix: args.topic_prefix.clone(),
+            security,
+            ..RtpsConfig::default()
+        },
         None,
         super::agent::life_file(None, args.domain, &args.topic_prefix, args.id),
     )?;

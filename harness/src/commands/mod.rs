@@ -13,3 +13,4 @@ pub mod inspect;
 pub mod receiver;
 pub mod replay;
 pub mod report;
+pub mod security;

@@ -27,8 +27,8 @@ pub use crate::status::{AgentStatus, AnswerTiming, JoinTimeline, StatusLine};
 
 use crate::AgentId;
 use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
-use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Send, WriteRefusal};
-use crate::envelope::Message;
+use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Output, Send, WriteRefusal};
+use crate::envelope::{Envelope, Message};
 
 /// Errors of the agent API.
 #[derive(Debug, thiserror::Error)]
@@ -178,6 +178,14 @@ impl<T: Transport + 'static> Agent<T> {
             }),
             (None, None) => None,
         };
+        if config.graph.is_none()
+            && let Some(path) = &config.life_file
+        {
+            config.graph = crate::life::recorded_graph(path).unwrap_or_else(|error| {
+                tracing::error!("{}: cannot read the graph record {}: {error}", config.id, path.display());
+                None
+            });
+        }
         let core = AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation }, seed, now);
         let state = Locked {
             core,
@@ -241,7 +249,9 @@ impl<T: Transport + 'static> Agent<T> {
             .spawn(move || {
                 while !inner.stop.load(Ordering::Relaxed) {
                     if let Ok(reply) = inner.service.outbox_rx.recv_timeout(tick) {
-                        inner.send(vec![Send { channel: Channel::Calls, message: reply, dest: Dest::All }], None);
+                        let graph = inner.lock().core.graph();
+                        inner
+                            .send(vec![Send { channel: Channel::Calls, message: reply, dest: Dest::All, graph }], None);
                     }
                 }
             })
@@ -272,12 +282,13 @@ impl<T: Transport + 'static> Agent<T> {
     /// Publishes the call replies this agent's server has produced so far (the threaded agent does this on its
     /// own; an agent driven by hand does it in [`Agent::pump`]). Returns how many.
     pub fn flush_call_replies(&self) -> usize {
+        let graph = self.inner.lock().core.graph();
         let replies: Vec<Send> = self
             .inner
             .service
             .outbox_rx
             .try_iter()
-            .map(|message| Send { channel: Channel::Calls, message, dest: Dest::All })
+            .map(|message| Send { channel: Channel::Calls, message, dest: Dest::All, graph })
             .collect();
         let n = replies.len();
         self.inner.send(replies, None);
@@ -346,6 +357,9 @@ impl<T: Transport + 'static> Agent<T> {
             replica: core.replica().map(Replica::id),
             ready: core.is_ready(),
             collision: core.collision().map(str::to_owned),
+            graph: core.graph(),
+            foreign_refused: core.foreign_refused(),
+            foreign_graphs: core.foreign_graphs().iter().copied().collect(),
             rejected: self.inner.rejected.load(Ordering::Relaxed),
             signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
@@ -370,6 +384,9 @@ impl<T: Transport + 'static> Agent<T> {
         StatusLine {
             id: status.id.0,
             ready: status.ready,
+            graph: status.graph,
+            foreign_refused: status.foreign_refused,
+            foreign_graphs: status.foreign_graphs,
             replica: status.replica.map(|r| r.0),
             nodes: status.nodes,
             edges: status.edges,
@@ -579,7 +596,8 @@ impl<T: Transport + 'static> Agent<T> {
         let pending =
             PendingCall { table: Arc::clone(&self.inner.calls), call, to, method: method.to_owned(), receiver };
         let message = Message::CallRequest { from: self.id(), to, call, method: method.to_owned(), args };
-        self.inner.transport.publish(Channel::Calls, message.encode()).map_err(|e| CallError::Send {
+        let graph = self.inner.lock().core.graph();
+        self.inner.transport.publish(Channel::Calls, message.encode(graph)).map_err(|e| CallError::Send {
             to,
             method: method.to_owned(),
             detail: e.to_string(),
@@ -645,14 +663,15 @@ impl<T: Transport> Inner<T> {
     /// Publishes what the core asked for (never called with the state lock held): to everyone, or to the endpoint
     /// `sender` alone where the transport can address one.
     fn send(&self, sends: Vec<Send>, sender: Option<transport::EndpointId>) {
-        for Send { channel, message, dest } in sends {
-            let result = match (dest, sender) {
-                (Dest::Sender, Some(to)) => self.transport.publish_to(channel, message.encode(), to),
-                _ => self.transport.publish(channel, message.encode()),
+        for send in sends {
+            let bytes = send.encode();
+            let result = match (send.dest, sender) {
+                (Dest::Sender, Some(to)) => self.transport.publish_to(send.channel, bytes, to),
+                _ => self.transport.publish(send.channel, bytes),
             };
             if let Err(error) = result {
                 self.publish_failures.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!("{}: publishing a {} message failed: {error}", self.me(), message.kind());
+                tracing::warn!("{}: publishing a {} message failed: {error}", self.me(), send.message.kind());
             }
         }
     }
@@ -699,9 +718,9 @@ impl<T: Transport> Inner<T> {
                     timeline.last_request_ns = Some(now);
                     timeline.requests += 1;
                 }
-                Event::Ready { replica, incarnation, alone, seed_nodes } => {
+                Event::Ready { graph, replica, incarnation, alone, seed_nodes } => {
                     if let Some(path) = &self.config.life_file
-                        && let Err(error) = crate::life::record(path, *incarnation)
+                        && let Err(error) = crate::life::record(path, *incarnation, *graph)
                     {
                         tracing::error!(
                             "{me}: cannot record incarnation {incarnation} in {}: {error}; a later life started \
@@ -725,7 +744,7 @@ impl<T: Transport> Inner<T> {
                     if let Some(nodes) = seed_nodes {
                         tracing::info!("{me}: started from the seed graph ({nodes} nodes)");
                     }
-                    tracing::info!("{me}: ready as replica {replica} (incarnation {incarnation})");
+                    tracing::info!("{me}: ready as replica {replica} (incarnation {incarnation}) of graph {graph}");
                     locked.timeline.alone = *alone;
                     self.joined.store(true, Ordering::Relaxed);
                 }
@@ -750,6 +769,13 @@ impl<T: Transport> Inner<T> {
                 Event::IncarnationsExhausted => {
                     tracing::error!("{me}: no incarnation is left for a new life; local writes are refused")
                 }
+                Event::ForeignGraph { graph, from, kind, mine } => {
+                    let mine = mine.map_or_else(|| "none yet".to_string(), |g| g.to_string());
+                    tracing::warn!(
+                        "{me}: refused a {kind} of graph {graph} from {from} ({origin}): this agent's graph is \
+                         {mine}; every message of graph {graph} is refused and counted, without another warning"
+                    );
+                }
             }
         }
     }
@@ -757,8 +783,8 @@ impl<T: Transport> Inner<T> {
     fn handle(&self, sample: Sample) {
         let received_ns = self.clock.now_ns();
         let origin = || format!("{} on channel {}", sample.origin, sample.channel.name());
-        let message = match Message::decode(&sample.bytes) {
-            Ok(message) => message,
+        let Envelope { graph, message } = match Envelope::decode(&sample.bytes) {
+            Ok(envelope) => envelope,
             Err(error) => return self.reject(&origin(), "sample", &error),
         };
         if message.to().is_some_and(|to| to != self.me()) {
@@ -767,13 +793,26 @@ impl<T: Transport> Inner<T> {
         let me = self.me();
         // Calls never touch the replica: route them without holding the state lock across the server.
         let message = match message {
-            Message::CallRequest { from, call, method, args, .. } => {
-                self.lock().core.heard_from(from);
-                return self.service.request(me, from, call, &method, args);
-            }
-            Message::CallReply { from, call, result, .. } => {
-                self.lock().core.heard_from(from);
-                return self.calls.deliver(from, call, result);
+            Message::CallRequest { .. } | Message::CallReply { .. } => {
+                let admitted = {
+                    let mut locked = self.lock();
+                    let mut out = Output::default();
+                    let admitted = locked.core.admit(graph, message.from(), message.kind(), &mut out);
+                    self.report(&mut locked, &out.events, &origin());
+                    if admitted {
+                        locked.core.heard_from(message.from());
+                    }
+                    admitted
+                };
+                match message {
+                    Message::CallRequest { from, call, method, args, .. } if admitted => {
+                        return self.service.request(me, from, call, &method, args);
+                    }
+                    Message::CallReply { from, call, result, .. } if admitted => {
+                        return self.calls.deliver(from, call, result);
+                    }
+                    _ => return,
+                }
             }
             other => other,
         };
@@ -789,7 +828,7 @@ impl<T: Transport> Inner<T> {
         let decoded_ns = self.clock.now_ns();
         let (out, answered) = {
             let mut locked = self.lock();
-            let out = locked.core.handle(decoded_ns, input);
+            let out = locked.core.handle(decoded_ns, graph, input);
             self.report(&mut locked, &out.events, &origin());
             if let (Some(bytes), true) = (answer_bytes, out.events.iter().any(|e| matches!(e, Event::Ready { .. }))) {
                 let timeline = &mut locked.timeline;

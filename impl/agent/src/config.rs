@@ -7,6 +7,7 @@ use dsr::json::CortexGraph;
 
 use crate::AgentId;
 use crate::core::ProtocolConfig;
+use crate::graph_id::GraphId;
 use crate::mutants::Plant;
 
 /// Default of [`AgentConfig::announce_group`]: groups of up to 8 agents announce every period.
@@ -17,6 +18,9 @@ pub const DEFAULT_ANNOUNCE_GROUP: u32 = 8;
 pub struct AgentConfig {
     /// This agent's id (below [`AgentId::LIMIT`]).
     pub id: AgentId,
+    /// The graph this agent belongs to ([`ProtocolConfig::graph`]). `None`: the graph its previous life recorded
+    /// in `life_file`, if any, else the graph it joins (or a new one, if it starts alone).
+    pub graph: Option<GraphId>,
     /// How long to wait for a graph from peers before starting alone.
     pub join_wait: Duration,
     /// How often to repeat the graph request while joining.
@@ -71,6 +75,7 @@ impl AgentConfig {
     pub fn new(id: AgentId) -> Self {
         AgentConfig {
             id,
+            graph: None,
             join_wait: Duration::from_secs(2),
             join_retry: Duration::from_millis(200),
             announce_period: Duration::from_millis(500),
@@ -94,6 +99,7 @@ impl AgentConfig {
     pub fn protocol(&self) -> ProtocolConfig {
         ProtocolConfig {
             id: self.id,
+            graph: self.graph,
             join_wait_ns: self.join_wait.as_nanos() as u64,
             join_retry_ns: self.join_retry.as_nanos() as u64,
             announce_period_ns: self.announce_period.as_nanos() as u64,

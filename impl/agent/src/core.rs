@@ -39,13 +39,15 @@ use transport::Channel;
 
 use crate::AgentId;
 use crate::envelope::Message;
+use crate::graph_id::GraphId;
 use crate::mutants::ProtocolMutant;
 use lives::reused_id;
 
 pub use input::{Decoded, Input};
 pub use output::{Dest, Event, Output, Send, WriteRefusal, Written};
 pub use settings::{
-    INCARNATION_LIMIT, LifeSeed, MAX_ANSWERED, ProtocolConfig, RANDOM_FLOOR_LIMIT, SNAPSHOT_IF_SMALLER_ABOVE_BYTES,
+    INCARNATION_LIMIT, LifeSeed, MAX_ANSWERED, MAX_FOREIGN_GRAPHS, ProtocolConfig, RANDOM_FLOOR_LIMIT,
+    SNAPSHOT_IF_SMALLER_ABOVE_BYTES,
 };
 
 /// model checker's states do not multiply by them (caches, a seed graph consumed once).
@@ -82,7 +84,14 @@ pub struct AgentCore {
     request_now: bool,
     /// Highest incarnation of this agent id seen anywhere.
     incarnation_floor: u32,
-    buffered: VecDeque<Arc<Delta>>,
+    /// The graph this life belongs to (see **Graphs**); `None` only while joining without a named graph.
+    graph: Option<GraphId>,
+    /// Foreign graph ids seen (each reported once), at most [`MAX_FOREIGN_GRAPHS`].
+    foreign: BTreeSet<GraphId>,
+    /// Messages of other graphs refused.
+    foreign_refused: u64,
+    /// Deltas received while joining, with their graph.
+    buffered: VecDeque<(GraphId, AgentId, Arc<Delta>)>,
     collision: Option<String>,
     next_announce_ns: u64,
     /// The latest local write not yet followed by an announce.
@@ -100,6 +109,7 @@ impl AgentCore {
     /// A life that starts joining at `now_ns`; `seed` is the graph to start from if no peer answers.
     pub fn new(config: ProtocolConfig, life: LifeSeed, seed: Option<CortexGraph>, now_ns: u64) -> Self {
         AgentCore {
+            graph: config.graph,
             config,
             life,
             replica: None,
@@ -107,6 +117,8 @@ impl AgentCore {
             last_request_ns: None,
             request_now: false,
             incarnation_floor: 0,
+            foreign: BTreeSet::new(),
+            foreign_refused: 0,
             buffered: VecDeque::new(),
             collision: None,
             next_announce_ns: now_ns,
@@ -127,6 +139,52 @@ impl AgentCore {
     /// The settings.
     pub fn config(&self) -> &ProtocolConfig {
         &self.config
+    }
+
+    /// The graph this life belongs to; `None` while it joins without a named graph (see **Graphs**).
+    pub fn graph(&self) -> Option<GraphId> {
+        self.graph
+    }
+
+    /// Messages of other graphs refused so far.
+    pub fn foreign_refused(&self) -> u64 {
+        self.foreign_refused
+    }
+
+    /// The foreign graph ids seen (at most [`MAX_FOREIGN_GRAPHS`]).
+    pub fn foreign_graphs(&self) -> &BTreeSet<GraphId> {
+        &self.foreign
+    }
+
+    /// Whether a message of kind `kind` carrying `graph` from `from` belongs to this life's graph. A foreign one
+    /// is counted and, the first time its graph id is seen, reported in `out`. A message with no graph id is
+    /// admitted only if it is a graph request; one of any graph is admitted while this life joins without a
+    /// named graph (its deltas are buffered with their graph until it knows its own).
+    pub fn admit(&mut self, graph: Option<GraphId>, from: AgentId, kind: &'static str, out: &mut Output) -> bool {
+        let Some(theirs) = graph else { return kind == "graph-request" };
+        match self.graph {
+            None => true,
+            Some(mine) if mine == theirs => true,
+            mine => {
+                self.refuse_foreign(theirs, from, kind, mine, out);
+                false
+            }
+        }
+    }
+
+    fn refuse_foreign(
+        &mut self,
+        theirs: GraphId,
+        from: AgentId,
+        kind: &'static str,
+        mine: Option<GraphId>,
+        out: &mut Output,
+    ) {
+        self.foreign_refused += 1;
+        if !self.foreign.contains(&theirs) && self.foreign.len() < MAX_FOREIGN_GRAPHS {
+            self.foreign.insert(theirs);
+            out.events.push(Event::ForeignGraph { graph: theirs, from, kind, mine });
+        }
     }
 
     /// This life's nonce.
@@ -221,6 +279,11 @@ impl AgentCore {
     /// The periodic work due at `now_ns`: graph requests while joining, starting alone after the join wait,
     /// announces.
     pub fn tick(&mut self, now_ns: u64) -> Output {
+        let out = self.tick_unstamped(now_ns);
+        out.stamp(self.graph)
+    }
+
+    fn tick_unstamped(&mut self, now_ns: u64) -> Output {
         let mut out = Output::default();
         if self.replica.is_none() {
             if now_ns.saturating_sub(self.joining_since_ns) >= self.config.join_wait_ns {
@@ -277,14 +340,20 @@ impl AgentCore {
         self.config.announce_period_ns.saturating_mul(agents.div_ceil(group).max(1))
     }
 
-    /// Handles a received message at `now_ns`.
-    pub fn handle(&mut self, now_ns: u64, input: Input) -> Output {
+    /// Handles at `now_ns` a received message of graph `graph` (the envelope's graph id). A message of another
+    /// graph is refused (see **Graphs**).
+    pub fn handle(&mut self, now_ns: u64, graph: Option<GraphId>, input: Input) -> Output {
         let mut out = Output::default();
+        if !self.admit(graph, input.from(), input.kind(), &mut out) {
+            return out;
+        }
+        // Admitted: `graph` is this life's, or any while joining without one (then a graph request may carry none).
+        let tag = graph.or(self.graph).map(|graph| (graph, input.from()));
         self.peers.insert(input.from());
         match input {
             Input::Delta { from, delta } => {
                 self.gap_request(from, &delta, now_ns, &mut out);
-                self.apply("delta", vec![delta], &mut out);
+                self.apply("delta", tag, vec![delta], &mut out);
             }
             Input::Announce { from, nonce, replica, applied, digest } => {
                 self.note_incarnations(&applied, &mut out);
@@ -296,12 +365,12 @@ impl AgentCore {
             Input::MissingRequest { from, applied, full } => self.answer_missing(from, &applied, full, &mut out),
             Input::Deltas { from, deltas } => {
                 self.answered_by(from);
-                self.apply("missing delta", deltas, &mut out);
+                self.apply("missing delta", tag, deltas, &mut out);
             }
             Input::Snapshot { from, snapshot } => {
                 self.answered_by(from);
                 self.note_incarnations(snapshot.context(), &mut out);
-                self.apply("snapshot", vec![snapshot], &mut out);
+                self.apply("snapshot", tag, vec![snapshot], &mut out);
             }
             Input::GraphRequest { from, nonce } => {
                 if from == self.id() {
@@ -312,11 +381,17 @@ impl AgentCore {
             }
             Input::GraphAnswer { nonce, snapshot, .. } => {
                 if nonce == self.life.nonce && self.replica.is_none() {
+                    // The first answer names the graph of a joiner that named none (unless it is refused).
+                    let named = self.graph;
+                    self.graph = named.or(graph);
                     self.become_ready(now_ns, Some(snapshot), &mut out);
+                    if self.replica.is_none() {
+                        self.graph = named;
+                    }
                 }
             }
         }
-        out
+        out.stamp(self.graph)
     }
 
     /// Runs a local operation on the replica at `now_ns`. Its deltas go out on [`Channel::Updates`]:
@@ -339,22 +414,31 @@ impl AgentCore {
         if !deltas.is_empty() {
             self.unannounced_write_ns = Some(now_ns);
         }
-        Ok((result, Written { from: self.config.id, deltas, changes }))
+        let graph = self.graph.unwrap_or_else(|| GraphId::from_nonce(self.life.nonce));
+        Ok((result, Written { from: self.config.id, graph, deltas, changes }))
     }
 
-    /// Joins remote deltas into the replica, or buffers them while joining.
-    fn apply(&mut self, what: &'static str, deltas: Vec<Arc<Delta>>, out: &mut Output) {
+    /// Joins remote deltas into the replica, or buffers them while joining, tagged with their graph and sender
+    /// (`source`).
+    fn apply(
+        &mut self,
+        what: &'static str,
+        source: Option<(GraphId, AgentId)>,
+        deltas: Vec<Arc<Delta>>,
+        out: &mut Output,
+    ) {
         // A join can change the store without moving the context (the snapshot repair): drop the caches.
         self.caches.0 = Caches::default();
         let Some(replica) = self.replica.as_mut() else {
             if self.config.plant.is(ProtocolMutant::DropEarlyDelta) {
                 return;
             }
+            let Some((graph, from)) = source else { return };
             for delta in deltas {
                 if self.buffered.len() >= self.config.max_buffered_deltas {
                     self.buffered.pop_front();
                 }
-                self.buffered.push_back(delta);
+                self.buffered.push_back((graph, from, delta));
             }
             return;
         };

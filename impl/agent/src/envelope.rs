@@ -1,9 +1,10 @@
 //! The agent-level wire envelope: what agents say to each other, around `dsr`'s delta encoding.
 //!
-//! Every sample starts with three bytes — a magic byte ([`MAGIC`]), the envelope version ([`VERSION`]) and the
-//! message kind — followed by the kind's fields in `postcard` and, for kinds that carry one delta or snapshot, the
-//! `dsr` bytes as the raw tail (no copy, no length). A one-attribute update is therefore the delta's ~40 bytes
-//! plus 4 or 5. **Decoding never panics**: foreign bytes, an unknown version or kind, truncated or trailing bytes,
+//! Every sample starts with an 11-byte header — a magic byte ([`MAGIC`]), the envelope version ([`VERSION`]), the
+//! message kind and the sender's graph id ([`GraphId`], 8 bytes little-endian; 0 = "no graph yet", allowed only in
+//! a joiner's graph request) — followed by the kind's fields in `postcard` and, for kinds that carry one delta or
+//! snapshot, the `dsr` bytes as the raw tail (no copy, no length). A one-attribute update is therefore the delta's
+//! ~40 bytes plus 12 or 13. An [`Envelope`] is the graph id with the [`Message`]. **Decoding never panics**: foreign bytes, an unknown version or kind, truncated or trailing bytes,
 //! and lists over the limits are [`EnvelopeError`]s that say which kind and what; payload slices share the
 //! sample's buffer. Deltas inside are decoded (and checked) by the agent with `dsr::Delta::decode`.
 //!
@@ -15,6 +16,7 @@ use dsr::{CausalContext, Dot, ReplicaId};
 use serde::{Deserialize, Serialize};
 
 use crate::AgentId;
+use crate::graph_id::GraphId;
 
 /// Why the serving agent could not answer with a response (sent in a call reply).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -33,8 +35,10 @@ pub enum CallFault {
 
 /// First byte of every envelope: a foreign sample on our topics is recognised at once.
 pub const MAGIC: u8 = 0xD5;
-/// The envelope version this build writes and reads.
-pub const VERSION: u8 = 1;
+/// The envelope version this build writes and reads (2: the graph id in the header).
+pub const VERSION: u8 = 2;
+/// Bytes of the header: magic, version, kind, graph id.
+pub const HEADER_BYTES: usize = 11;
 /// Most version-vector entries in a carried context.
 pub const MAX_VV: usize = 1 << 16;
 /// Most out-of-order dots in a carried context.
@@ -142,8 +146,8 @@ pub enum Message {
 /// Why a sample is not a message of this build. Messages name the kind and what is wrong.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum EnvelopeError {
-    /// Fewer than three header bytes.
-    #[error("envelope of {0} bytes is shorter than its 3-byte header")]
+    /// Fewer than [`HEADER_BYTES`] header bytes.
+    #[error("envelope of {0} bytes is shorter than its {HEADER_BYTES}-byte header")]
     Short(usize),
     /// Not our magic byte: some other program's sample.
     #[error("foreign sample: first byte {found:#04x} is not the dsr envelope magic {MAGIC:#04x}")]
@@ -225,8 +229,36 @@ impl Serialize for Block<'_> {
     }
 }
 
-fn header(kind: u8) -> Vec<u8> {
-    vec![MAGIC, VERSION, kind]
+fn header(kind: u8, graph: Option<GraphId>) -> Vec<u8> {
+    let mut out = Vec::with_capacity(64);
+    out.extend_from_slice(&[MAGIC, VERSION, kind]);
+    out.extend_from_slice(&graph.map_or(0, GraphId::get).to_le_bytes());
+    out
+}
+
+/// A message with the graph id of its sender's graph: what one sample carries.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Envelope {
+    /// The sender's graph; `None` only in the graph request of a joiner that names no graph.
+    pub graph: Option<GraphId>,
+    /// The message.
+    pub message: Message,
+}
+
+impl Envelope {
+    /// Encodes the message with its graph id.
+    pub fn encode(&self) -> Bytes {
+        self.message.encode(self.graph)
+    }
+
+    /// Decodes a sample. Payload fields are slices of `bytes` (no copy).
+    ///
+    /// # Errors
+    /// [`EnvelopeError`] for anything that is not a well-formed message of this version, including a message
+    /// other than a graph request without a graph id.
+    pub fn decode(bytes: &Bytes) -> Result<Envelope, EnvelopeError> {
+        Message::decode_envelope(bytes)
+    }
 }
 
 fn put<T: Serialize + ?Sized>(out: Vec<u8>, value: &T) -> Vec<u8> {
@@ -277,8 +309,10 @@ impl Message {
         }
     }
 
-    /// Encodes the message.
-    pub fn encode(&self) -> Bytes {
+    /// Encodes the message as a sample of graph `graph` (`None`: a joiner that names no graph; only for a graph
+    /// request).
+    pub fn encode(&self, graph: Option<GraphId>) -> Bytes {
+        let header = |kind| header(kind, graph);
         let out = match self {
             Message::Delta { from, delta } => {
                 let mut out = put(header(K_DELTA), &from.0);
@@ -317,21 +351,24 @@ impl Message {
         Bytes::from(out)
     }
 
-    /// Decodes a sample. Payload fields are slices of `bytes` (no copy).
-    ///
-    /// # Errors
-    /// [`EnvelopeError`] for anything that is not a well-formed message of this version.
-    pub fn decode(bytes: &Bytes) -> Result<Message, EnvelopeError> {
-        let [magic, version, kind, ..] = bytes[..] else {
-            return Err(EnvelopeError::Short(bytes.len()));
-        };
-        if magic != MAGIC {
+    fn decode_envelope(bytes: &Bytes) -> Result<Envelope, EnvelopeError> {
+        if let Some(&magic) = bytes.first()
+            && magic != MAGIC
+        {
             return Err(EnvelopeError::Foreign { found: magic });
         }
-        if version != VERSION {
+        if let Some(&version) = bytes.get(1)
+            && version != VERSION
+        {
             return Err(EnvelopeError::Version { found: version });
         }
-        let body = &bytes[3..];
+        let Some((head, body)) = bytes.split_at_checked(HEADER_BYTES) else {
+            return Err(EnvelopeError::Short(bytes.len()));
+        };
+        let kind = head[2];
+        let mut graph_bytes = [0u8; 8];
+        graph_bytes.copy_from_slice(&head[3..HEADER_BYTES]);
+        let graph = GraphId::new(u64::from_le_bytes(graph_bytes));
         let name = match kind {
             K_DELTA => "delta",
             K_ANNOUNCE => "announce",
@@ -345,6 +382,9 @@ impl Message {
             other => return Err(EnvelopeError::Kind(other)),
         };
         let malformed = |detail: String| EnvelopeError::Malformed { kind: name, detail };
+        if graph.is_none() && kind != K_GRAPH_REQUEST {
+            return Err(malformed("no graph id (only a joiner's graph request may name no graph)".into()));
+        }
         // Fields, then the raw tail (a payload) or nothing.
         let tail = |rest: &[u8]| bytes.slice_ref(rest);
         let whole = |rest: &[u8]| {
@@ -426,7 +466,7 @@ impl Message {
                 Message::CallReply { from: AgentId(from), to: AgentId(to), call, result: result.map(tail) }
             }
         };
-        Ok(message)
+        Ok(Envelope { graph, message })
     }
 }
 
@@ -434,6 +474,12 @@ impl Message {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    const G: Option<GraphId> = GraphId::new(0x5eed);
+
+    fn decode(bytes: &Bytes) -> Result<Message, EnvelopeError> {
+        Envelope::decode(bytes).map(|envelope| envelope.message)
+    }
 
     fn samples() -> Vec<Message> {
         let mut replica = dsr::Replica::new(ReplicaId(7));
@@ -464,51 +510,61 @@ mod tests {
     #[test]
     fn every_kind_round_trips_and_an_update_is_small() {
         for message in samples() {
-            let bytes = message.encode();
-            assert_eq!(Message::decode(&bytes).unwrap(), message, "{}", message.kind());
+            let bytes = message.encode(G);
+            assert_eq!(Envelope::decode(&bytes).unwrap(), Envelope { graph: G, message: message.clone() });
         }
-        let update = samples()[0].encode();
-        assert!(update.len() < 60, "a one-attribute update is {} bytes", update.len());
+        let update = samples()[0].encode(G);
+        assert!(update.len() < 68, "a one-attribute update is {} bytes", update.len());
+    }
+
+    #[test]
+    fn only_a_graph_request_may_name_no_graph() {
+        let request = Message::GraphRequest { from: AgentId(1), nonce: 4 };
+        assert_eq!(Envelope::decode(&request.encode(None)).unwrap(), Envelope { graph: None, message: request });
+        for message in samples().into_iter().filter(|m| m.kind() != "graph-request") {
+            let error = Envelope::decode(&message.encode(None)).unwrap_err();
+            assert!(error.to_string().contains("no graph id"), "{}: {error}", message.kind());
+        }
     }
 
     #[test]
     fn foreign_version_kind_short_and_trailing_are_named_errors() {
-        let good = samples()[5].encode();
-        assert_eq!(Message::decode(&Bytes::from_static(b"ab")), Err(EnvelopeError::Short(2)));
+        let good = samples()[5].encode(G);
+        assert_eq!(decode(&Bytes::from(vec![MAGIC, VERSION])), Err(EnvelopeError::Short(2)));
         let mut foreign = good.to_vec();
         foreign[0] = b'R';
-        assert!(matches!(Message::decode(&Bytes::from(foreign)), Err(EnvelopeError::Foreign { found: b'R' })));
+        assert!(matches!(decode(&Bytes::from(foreign)), Err(EnvelopeError::Foreign { found: b'R' })));
         let mut version = good.to_vec();
         version[1] = 9;
-        assert_eq!(Message::decode(&Bytes::from(version)), Err(EnvelopeError::Version { found: 9 }));
+        assert_eq!(decode(&Bytes::from(version)), Err(EnvelopeError::Version { found: 9 }));
         let mut kind = good.to_vec();
         kind[2] = 200;
-        assert_eq!(Message::decode(&Bytes::from(kind)), Err(EnvelopeError::Kind(200)));
+        assert_eq!(decode(&Bytes::from(kind)), Err(EnvelopeError::Kind(200)));
         let mut trailing = good.to_vec();
         trailing.push(0);
-        let error = Message::decode(&Bytes::from(trailing)).unwrap_err();
+        let error = decode(&Bytes::from(trailing)).unwrap_err();
         assert!(error.to_string().contains("graph-request") && error.to_string().contains("trailing"), "{error}");
     }
 
     proptest! {
         #[test]
         fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..256), kind in 0u8..12) {
-            let mut framed = vec![MAGIC, VERSION, kind];
+            let mut framed = vec![MAGIC, VERSION, kind, 0xed, 0x5e, 0, 0, 0, 0, 0, 0];
             framed.extend_from_slice(&bytes);
-            let _ = Message::decode(&Bytes::from(framed));
-            let _ = Message::decode(&Bytes::from(bytes));
+            let _ = decode(&Bytes::from(framed));
+            let _ = decode(&Bytes::from(bytes));
         }
 
         #[test]
         fn truncated_and_flipped_messages_never_panic(which in 0usize..10, cut in any::<prop::sample::Index>(),
                                                       flip in any::<prop::sample::Index>(), bit in 0u8..8) {
-            let bytes = samples()[which].encode().to_vec();
+            let bytes = samples()[which].encode(G).to_vec();
             let n = cut.index(bytes.len());
-            let _ = Message::decode(&Bytes::copy_from_slice(&bytes[..n]));
+            let _ = decode(&Bytes::copy_from_slice(&bytes[..n]));
             let mut flipped = bytes.clone();
             let at = flip.index(flipped.len());
             flipped[at] ^= 1 << bit;
-            if let Ok(Message::Delta { delta, .. }) = Message::decode(&Bytes::from(flipped)) {
+            if let Ok(Message::Delta { delta, .. }) = decode(&Bytes::from(flipped)) {
                 let _ = dsr::Delta::decode(&delta);
             }
         }

@@ -55,6 +55,7 @@ pub mod calls;
 pub mod config;
 pub mod core;
 pub mod envelope;
+pub mod graph_id;
 pub mod life;
 pub mod mutants;
 pub mod rtps;
@@ -63,6 +64,7 @@ pub mod status;
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline, StatusLine};
 pub use calls::{CallError, CallReplier, CallServer, PendingCall};
 pub use envelope::CallFault;
+pub use graph_id::GraphId;
 pub use status::Control;
 
 /// A CORTEX agent id (12 bits: 0..4096).

@@ -1,42 +1,74 @@
 //! The incarnation record: one small file per agent id and graph, where each life writes its incarnation before it
 //! writes to the graph, so the next life on this host takes a higher one even when no peer is reachable (see the
-//! crate's **Identity**). The file holds the number in decimal and a newline; it is replaced atomically (written
-//! beside, synced, renamed), so a crash leaves the old record or the new one, never a torn one.
+//! crate's **Identity**). The file holds the number in decimal and a newline, then the id of the graph that life
+//! belonged to (`graph <16 hex digits>`; files written before graph ids have no such line), so a restarted agent
+//! that names no graph rejoins its own rather than creating a new one. It is replaced atomically (written beside,
+//! synced, renamed), so a crash leaves the old record or the new one, never a torn one.
 
 use std::io::Write;
 use std::path::Path;
+
+use crate::graph_id::GraphId;
 
 /// The incarnation recorded in `path`, or `None` when there is no such file.
 ///
 /// # Errors
 /// The file cannot be read, or does not hold a number (the message names the file and what it holds).
 pub fn recorded(path: &Path) -> Result<Option<u32>, String> {
-    match std::fs::read_to_string(path) {
-        Ok(text) => {
-            text.trim().parse::<u32>().map(Some).map_err(|error| {
-                format!("{} holds {:?}, not an incarnation number: {error}", path.display(), text.trim())
-            })
-        }
-        Err(error) if error.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(error) => Err(format!("reading {}: {error}", path.display())),
-    }
+    Ok(read(path)?.map(|(incarnation, _)| incarnation))
 }
 
-/// Records `incarnation` in `path` (creating its directory), durably, unless a higher one is recorded already.
+/// The graph recorded in `path` by the previous life, or `None` when there is no file or it names no graph.
+///
+/// # Errors
+/// As [`recorded`], or a graph line that is not a graph id.
+pub fn recorded_graph(path: &Path) -> Result<Option<GraphId>, String> {
+    Ok(read(path)?.and_then(|(_, graph)| graph))
+}
+
+fn read(path: &Path) -> Result<Option<(u32, Option<GraphId>)>, String> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(error) => return Err(format!("reading {}: {error}", path.display())),
+    };
+    let mut lines = text.lines().map(str::trim).filter(|line| !line.is_empty());
+    let first = lines.next().unwrap_or_default();
+    let incarnation = first
+        .parse::<u32>()
+        .map_err(|error| format!("{} holds {first:?}, not an incarnation number: {error}", path.display()))?;
+    let graph = match lines.next() {
+        None => None,
+        Some(line) => {
+            let id = line
+                .strip_prefix("graph ")
+                .ok_or_else(|| format!("{}: second line {line:?} is not `graph <16 hex digits>`", path.display()))?;
+            Some(id.parse::<GraphId>().map_err(|error| format!("{}: {error}", path.display()))?)
+        }
+    };
+    Ok(Some((incarnation, graph)))
+}
+
+/// Records `incarnation` and `graph` in `path` (creating its directory), durably; the incarnation recorded is
+/// never lowered.
 ///
 /// # Errors
 /// The directory or file cannot be written (the message names the path).
-pub fn record(path: &Path, incarnation: u32) -> Result<(), String> {
-    if recorded(path).ok().flatten().is_some_and(|current| current >= incarnation) {
+pub fn record(path: &Path, incarnation: u32, graph: GraphId) -> Result<(), String> {
+    let current = read(path).ok().flatten();
+    if current.is_some_and(|(at, recorded)| at >= incarnation && recorded == Some(graph)) {
         return Ok(());
     }
+    let incarnation = incarnation.max(current.map_or(0, |(at, _)| at));
     let context = |what: &str, error: std::io::Error| format!("{what} {}: {error}", path.display());
     if let Some(dir) = path.parent().filter(|dir| !dir.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| context("creating the directory of", e))?;
     }
     let temporary = path.with_extension(format!("tmp{}", std::process::id()));
     let mut file = std::fs::File::create(&temporary).map_err(|e| context("creating a file beside", e))?;
-    writeln!(file, "{incarnation}").and_then(|()| file.sync_all()).map_err(|e| context("writing beside", e))?;
+    writeln!(file, "{incarnation}\ngraph {graph}")
+        .and_then(|()| file.sync_all())
+        .map_err(|e| context("writing beside", e))?;
     std::fs::rename(&temporary, path).map_err(|e| context("replacing", e))
 }
 
@@ -48,13 +80,17 @@ mod tests {
     fn a_record_is_read_back_and_never_lowered() {
         let dir = std::env::temp_dir().join(format!("agent-life-{}", std::process::id()));
         let path = dir.join("nested").join("a1.life");
+        let graph = GraphId::from_nonce(1);
         assert_eq!(recorded(&path), Ok(None));
-        record(&path, 3).unwrap();
+        record(&path, 3, graph).unwrap();
         assert_eq!(recorded(&path), Ok(Some(3)));
-        record(&path, 2).unwrap();
+        assert_eq!(recorded_graph(&path), Ok(Some(graph)));
+        record(&path, 2, graph).unwrap();
         assert_eq!(recorded(&path), Ok(Some(3)));
-        record(&path, 7).unwrap();
+        record(&path, 7, graph).unwrap();
         assert_eq!(recorded(&path), Ok(Some(7)));
+        std::fs::write(&path, "4\n").unwrap();
+        assert_eq!((recorded(&path), recorded_graph(&path)), (Ok(Some(4)), Ok(None)));
         std::fs::write(&path, "seven\n").unwrap();
         assert!(recorded(&path).unwrap_err().contains("not an incarnation number"));
         let _ = std::fs::remove_dir_all(dir);

@@ -5,6 +5,7 @@ use dsr::ReplicaId;
 use transport::TransportStats;
 
 use crate::AgentId;
+use crate::graph_id::GraphId;
 
 /// When each step of this agent's late join happened, in nanoseconds on the agent's clock; `None` for a step not
 /// reached (yet). With the system clock, times of agents in different processes on one host compare.
@@ -58,6 +59,12 @@ pub struct AgentStatus {
     pub ready: bool,
     /// An id collision, if one was seen.
     pub collision: Option<String>,
+    /// The graph this agent belongs to (`None` while it joins without naming one).
+    pub graph: Option<GraphId>,
+    /// Messages of other graphs refused (see `crate::core`, **Graphs**).
+    pub foreign_refused: u64,
+    /// The foreign graph ids heard (at most `crate::core::MAX_FOREIGN_GRAPHS`).
+    pub foreign_graphs: Vec<GraphId>,
     /// Samples rejected (foreign, malformed, or refused by the replica).
     pub rejected: u64,
     /// Change signals dropped because a subscriber's channel was full.
@@ -101,6 +108,15 @@ pub struct StatusLine {
     pub id: u32,
     /// Whether it has a graph (joined, or started alone).
     pub ready: bool,
+    /// The graph it belongs to (`None` while it joins without naming one).
+    #[serde(default)]
+    pub graph: Option<GraphId>,
+    /// Messages of other graphs on the same domain and topic prefix refused (never merged).
+    #[serde(default)]
+    pub foreign_refused: u64,
+    /// The foreign graph ids heard.
+    #[serde(default)]
+    pub foreign_graphs: Vec<GraphId>,
     /// The replica id of this life, once ready.
     pub replica: Option<u32>,
     /// Visible nodes.

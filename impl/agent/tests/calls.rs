@@ -7,7 +7,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use agent::{Agent, AgentConfig, AgentId, CallError};
+use agent::{Agent, AgentConfig, AgentId, CallError, GraphId};
 use bica::debug::{DebugCollector, DebugFrame, DebugPrimitive, Debuggable, Frame, Point2, Rgba, Shape};
 use bica::prelude::*;
 use bica::service::{COMPONENTS, ComponentsReply, DEBUG_FRAME, SET_DEBUG, Service, ServiceBuilder, SetDebug};
@@ -70,7 +70,13 @@ fn world(max_calls_in_flight: usize) -> World {
     let bus = Bus::new();
     let clock = ManualClock::new(1_000_000_000);
     let agent = |id: u32| {
-        let config = AgentConfig { max_calls_in_flight, nonce: Some(u64::from(id)), ..AgentConfig::new(AgentId(id)) };
+        let config = AgentConfig {
+            max_calls_in_flight,
+            nonce: Some(u64::from(id)),
+            // Both start alone at once: one graph, named (each would otherwise create its own).
+            graph: GraphId::new(0xca11),
+            ..AgentConfig::new(AgentId(id))
+        };
         Agent::new(config, bus.attach(1024), Arc::new(clock.clone()) as Arc<dyn Clock>).unwrap()
     };
     let mut runtime = Runtime::new(RuntimeConfig::default(), VirtualClock::new(0));
@@ -211,7 +217,11 @@ fn a_call_over_rtps_reaches_a_driver_runtime_and_comes_back() {
         let prefix = format!("calls{}", std::process::id());
         RtpsTransport::new(RtpsConfig { domain_id: 78, topic_prefix: prefix, ..RtpsConfig::default() }).unwrap()
     };
-    let config = |id: u32| AgentConfig { join_wait: Duration::from_millis(200), ..AgentConfig::new(AgentId(id)) };
+    let config = |id: u32| AgentConfig {
+        join_wait: Duration::from_millis(200),
+        graph: GraphId::new(0xca11),
+        ..AgentConfig::new(AgentId(id))
+    };
     let server = Agent::start(config(2), rtps(), Arc::new(SystemClock)).unwrap();
     let caller = Agent::start(config(1), rtps(), Arc::new(SystemClock)).unwrap();
     let driver = Driver::spawn(RuntimeConfig::default(), build).unwrap();

@@ -4,13 +4,18 @@
 use std::time::Duration;
 
 use agent::core::{AgentCore, Event, Input, LifeSeed, Output};
-use agent::envelope::Message;
-use agent::{AgentConfig, AgentId};
+use agent::envelope::{Envelope, Message};
+use agent::{AgentConfig, AgentId, GraphId};
 use dsr::NewNode;
 
-/// A life of agent 3 that starts alone at its first tick.
+/// The graph the tests' lives belong to, unless they say otherwise.
+fn graph_g() -> Option<GraphId> {
+    GraphId::new(0x6a)
+}
+
+/// A life of agent 3 of graph G that starts alone at its first tick.
 fn alone(nonce: u64, recorded_incarnation: Option<u32>) -> (AgentCore, Output) {
-    let config = AgentConfig { join_wait: Duration::ZERO, ..AgentConfig::new(AgentId(3)) };
+    let config = AgentConfig { join_wait: Duration::ZERO, graph: graph_g(), ..AgentConfig::new(AgentId(3)) };
     let mut core = AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation }, None, 0);
     let out = core.tick(0);
     assert!(core.is_ready());
@@ -31,9 +36,9 @@ fn incarnation(out: &Output) -> u32 {
 fn deliver(out: &[agent::core::Send], to: &mut AgentCore) -> Vec<Event> {
     let mut events = Vec::new();
     for send in out {
-        let message = Message::decode(&send.message.encode()).unwrap();
-        if let Some(input) = Input::decode(message).input {
-            events.extend(to.handle(1, input).events);
+        let envelope = Envelope::decode(&send.encode()).unwrap();
+        if let Some(input) = Input::decode(envelope.message).input {
+            events.extend(to.handle(1, envelope.graph, input).events);
         }
     }
     events
@@ -91,8 +96,9 @@ fn answer_to_a_peer_missing_frames(frames: u32, frame_bytes: usize) -> Vec<Messa
     }
     let request =
         Message::MissingRequest { from: AgentId(4), to: AgentId(3), applied: dsr::CausalContext::new(), full: false };
-    let input = Input::decode(Message::decode(&request.encode()).unwrap()).input.unwrap();
-    writer.handle(100, input).sends.into_iter().map(|s| s.message).collect()
+    let envelope = Envelope::decode(&request.encode(graph_g())).unwrap();
+    let input = Input::decode(envelope.message).input.unwrap();
+    writer.handle(100, envelope.graph, input).sends.into_iter().map(|s| s.message).collect()
 }
 
 #[test]
@@ -119,9 +125,9 @@ fn a_peer_missing_many_overwritten_frames_gets_a_snapshot_and_one_missing_a_few_
 fn exchange(sends: &[agent::core::Send], to: &mut AgentCore, now_ns: u64) -> Output {
     let mut replies = Output::default();
     for send in sends {
-        let message = Message::decode(&send.message.encode()).unwrap();
-        if let Some(input) = Input::decode(message).input {
-            let out = to.handle(now_ns, input);
+        let envelope = Envelope::decode(&send.encode()).unwrap();
+        if let Some(input) = Input::decode(envelope.message).input {
+            let out = to.handle(now_ns, envelope.graph, input);
             replies.sends.extend(out.sends);
             replies.events.extend(out.events);
         }
@@ -169,6 +175,7 @@ fn announcer(id: u32, group: u32) -> AgentCore {
         join_wait: Duration::ZERO,
         announce_period: Duration::from_millis(100),
         announce_group: group,
+        graph: graph_g(),
         ..AgentConfig::new(AgentId(id))
     };
     let mut core =
@@ -215,4 +222,109 @@ fn with_no_announce_group_every_agent_announces_every_period_however_many_it_hea
         deliver(&sends, &mut core);
     }
     assert_eq!(core.announce_interval_ns(), 100_000_000);
+}
+
+/// A life of agent `id` that joins (join wait 5 s), naming graph `graph` or none.
+fn joiner(id: u32, nonce: u64, graph: Option<GraphId>) -> AgentCore {
+    let config = AgentConfig { join_wait: Duration::from_secs(5), graph, ..AgentConfig::new(AgentId(id)) };
+    AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation: None }, None, 0)
+}
+
+/// A ready life of agent `id` of graph `graph` holding one node named `name`.
+fn ready_with_node(id: u32, graph: u64, name: &str) -> AgentCore {
+    let config = AgentConfig { join_wait: Duration::ZERO, graph: GraphId::new(graph), ..AgentConfig::new(AgentId(id)) };
+    let mut core =
+        AgentCore::new(config.protocol(), LifeSeed { nonce: u64::from(id), recorded_incarnation: None }, None, 0);
+    core.tick(0);
+    core.write(1, |r, now| r.insert_node(now, NewNode::new("object", name)).map(|(_, d)| ((), vec![d]))).unwrap();
+    core
+}
+
+fn foreign_events(events: &[Event]) -> Vec<GraphId> {
+    events
+        .iter()
+        .filter_map(|event| match event {
+            Event::ForeignGraph { graph, .. } => Some(*graph),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn a_delta_of_another_graph_is_refused_counted_and_reported_once_per_foreign_graph() {
+    let mut a = ready_with_node(1, 0xa, "a");
+    let before = a.replica().unwrap().digest();
+    let mut events = Vec::new();
+    for (id, graph) in [(2, 0xb), (3, 0xb), (4, 0xc)] {
+        let mut other = ready_with_node(id, graph, "x");
+        let (_, written) = other
+            .write(2, |r, now| r.insert_node(now, NewNode::new("object", "intruder")).map(|(_, d)| ((), vec![d])))
+            .unwrap();
+        events.extend(deliver(&written.sends(), &mut a));
+        events.extend(deliver(&other.tick(10).sends, &mut a));
+    }
+    assert_eq!(foreign_events(&events), [GraphId::new(0xb).unwrap(), GraphId::new(0xc).unwrap()], "{events:?}");
+    assert_eq!(a.foreign_refused(), 6);
+    assert_eq!(a.replica().unwrap().digest(), before, "nothing of a foreign graph was merged");
+    assert!(a.peers().is_empty(), "agents of other graphs are not peers: {:?}", a.peers());
+}
+
+#[test]
+fn a_joiner_that_names_no_graph_takes_the_graph_it_joins() {
+    let mut a = ready_with_node(1, 0xa, "a");
+    let mut joiner = joiner(5, 50, None);
+    let request = joiner.tick(1);
+    assert_eq!(request.sends[0].graph, None, "its request names no graph");
+    let answer = exchange(&request.sends, &mut a, 2);
+    exchange(&answer.sends, &mut joiner, 3);
+    assert_eq!(joiner.graph(), GraphId::new(0xa));
+    assert_eq!(joiner.replica().unwrap().digest(), a.replica().unwrap().digest());
+}
+
+#[test]
+fn a_joiner_that_hears_two_graphs_takes_the_first_answer_and_refuses_the_other() {
+    let mut a = ready_with_node(1, 0xa, "a");
+    let mut b = ready_with_node(2, 0xb, "b");
+    let mut joiner = joiner(5, 50, None);
+    // While it joins, both graphs write: their deltas are buffered with their graph.
+    for (core, name) in [(&mut a, "a2"), (&mut b, "b2")] {
+        let (_, written) = core
+            .write(2, |r, now| r.insert_node(now, NewNode::new("object", name)).map(|(_, d)| ((), vec![d])))
+            .unwrap();
+        deliver(&written.sends(), &mut joiner);
+    }
+    let request = joiner.tick(3);
+    let from_b = exchange(&request.sends, &mut b, 4);
+    let from_a = exchange(&request.sends, &mut a, 4);
+    let joined = exchange(&from_b.sends, &mut joiner, 5);
+    let late = exchange(&from_a.sends, &mut joiner, 6);
+    assert_eq!(joiner.graph(), GraphId::new(0xb));
+    assert_eq!(joiner.replica().unwrap().digest(), b.replica().unwrap().digest());
+    assert_eq!(foreign_events(&joined.events), [GraphId::new(0xa).unwrap()], "the buffered delta of A is refused");
+    assert!(foreign_events(&late.events).is_empty(), "graph A was reported once: {:?}", late.events);
+    assert_eq!(joiner.foreign_refused(), 2);
+}
+
+#[test]
+fn a_joiner_that_names_a_graph_is_not_answered_by_another_graph_and_starts_it_alone() {
+    let mut a = ready_with_node(1, 0xa, "a");
+    let mut joiner = joiner(5, 50, GraphId::new(0xb));
+    let request = joiner.tick(1);
+    let answer = exchange(&request.sends, &mut a, 2);
+    assert!(answer.sends.is_empty(), "{:?}", answer.sends);
+    assert_eq!(foreign_events(&answer.events), [GraphId::new(0xb).unwrap()]);
+    let out = joiner.tick(6_000_000_000);
+    assert!(joiner.is_ready());
+    assert!(
+        out.events
+            .iter()
+            .any(|e| matches!(e, Event::Ready { graph, alone: true, .. } if Some(*graph) == GraphId::new(0xb)))
+    );
+}
+
+#[test]
+fn a_life_that_starts_alone_naming_no_graph_creates_one_with_an_id_from_its_nonce() {
+    let mut joiner = joiner(5, 77, None);
+    joiner.tick(6_000_000_000);
+    assert_eq!(joiner.graph(), Some(GraphId::from_nonce(77)));
 }

@@ -1,13 +1,13 @@
 //! Deterministic simulations of several agents on the in-process bus behind the seeded fault injector: loss,
 //! duplication, reordering, a healed partition and a restart, over many seeds. Every replica converges (equal
 //! digests and contexts) and the replica invariants hold after every step. Also: late join, change signals,
-//! bad samples, id collisions.
+//! bad samples, id collisions, two graphs on one bus.
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use agent::envelope::Message;
-use agent::{Agent, AgentConfig, AgentId, ChangeSignal};
+use agent::{Agent, AgentConfig, AgentId, ChangeSignal, GraphId};
 use bytes::Bytes;
 use dsr::{Change, NewNode, NodeId, Replica, ReplicaId, Value, attrs};
 use transport::fault::{FaultConfig, FaultInjector, FaultPlan};
@@ -36,6 +36,8 @@ fn config(id: u32, nonce: u64) -> AgentConfig {
         answer_hold: Duration::from_millis(100),
         announce_period: Duration::from_millis(40),
         nonce: Some(nonce),
+        // One graph, named: agents that start alone at once (a partition at start) are still of one graph.
+        graph: GraphId::new(0x51),
         ..AgentConfig::new(AgentId(id))
     }
 }
@@ -317,17 +319,19 @@ fn malformed_and_foreign_samples_are_dropped_and_the_graph_stays_intact() {
     let mut other = Replica::with_dictionary(ReplicaId(77), dsr::Dictionary::permissive());
     let (node, _) = other.insert_node(1, NewNode::new("object", "x").with_id(NodeId(5))).unwrap();
     let wrong = other.set_attrs(2, node, [("speed", Value::I32(3))]).unwrap();
-    let good_delta = Message::Delta { from: AgentId(9), delta: Bytes::from(wrong.encode()) }.encode();
+    let good_delta = Message::Delta { from: AgentId(9), delta: Bytes::from(wrong.encode()) }.encode(GraphId::new(0x51));
     let mut bad_delta = good_delta.to_vec();
     let last = bad_delta.len() - 1;
     bad_delta[last] ^= 0xFF;
     let samples: Vec<Bytes> = vec![
         Bytes::from_static(b"RTPS garbage"),
         Bytes::from_static(&[0xD5, 9, 1, 0]),
-        Bytes::from_static(&[0xD5, 1, 77]),
+        Bytes::from_static(&[0xD5, 2, 77]),
+        Bytes::from_static(&[0xD5, 2, 77, 0x51, 0, 0, 0, 0, 0, 0, 0]),
         Bytes::from(bad_delta),
-        Bytes::from(vec![0xD5, 1, 2, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF]),
-        Bytes::from(vec![0xD5, 1, 1, 3]),
+        Bytes::from(vec![0xD5, 2, 2, 0x51, 0, 0, 0, 0, 0, 0, 0, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF]),
+        Bytes::from(vec![0xD5, 2, 1, 0x51, 0, 0, 0, 0, 0, 0, 0, 3]),
+        Bytes::from(vec![0xD5, 2, 1, 0, 0, 0, 0, 0, 0, 0, 0, 3]),
     ];
     let count = samples.len();
     for bytes in samples {
@@ -436,4 +440,58 @@ fn a_lost_last_write_is_announced_once_the_writer_is_quiet_not_at_the_next_perio
     let steps = sim.settle(40);
     assert!(steps <= 15, "converged after {steps} more steps");
     assert_eq!(sim.agents[1].attr(id, attrs::POS_X), Some(1.0));
+}
+
+/// Two graphs on one bus (one domain and topic prefix): agents 1 and 2 of graph A, agent 3 of graph B, all writing
+/// under loss and reordering. A's agents converge without a trace of B's writes, B keeps its own, and each agent
+/// reports the other graph once and counts every refused message.
+#[test]
+fn two_graphs_on_one_bus_never_merge_and_each_refuses_the_other() {
+    let (graph_a, graph_b) = (GraphId::new(0xa).unwrap(), GraphId::new(0xb).unwrap());
+    let mut sim = Sim::new(23, FaultConfig { loss: 0.05, reorder: 0.1, ..FaultConfig::default() });
+    sim.spawn_with(1, |c| AgentConfig { graph: Some(graph_a), ..c });
+    sim.spawn_with(2, |c| AgentConfig { graph: None, join_wait: Duration::from_secs(60), ..c });
+    sim.spawn_with(3, |c| AgentConfig { graph: Some(graph_b), ..c });
+    sim.steps(400);
+    assert!(sim.agents[0].is_ready() && sim.agents[2].is_ready());
+    // Agent 2 named no graph: it asked everyone and took the first answer (from 1 or 3); the checks follow it.
+    let joined = sim.agents[1].status().graph;
+    assert!(joined == Some(graph_a) || joined == Some(graph_b), "{joined:?}");
+    for round in 0..200u32 {
+        for (index, agent) in sim.agents.iter().enumerate() {
+            let _ = agent.insert_node(NewNode::new("object", &format!("n{index}_{round}")));
+        }
+        sim.step();
+    }
+    let mut steps = 0;
+    while steps < 20_000 {
+        let same = |i: usize, j: usize| sim.agents[i].digest() == sim.agents[j].digest();
+        let done = if joined == Some(graph_a) { same(0, 1) } else { same(1, 2) };
+        if done {
+            break;
+        }
+        sim.step();
+        steps += 1;
+    }
+    let names = |index: usize| -> Vec<String> {
+        sim.agents[index].read(|r| r.nodes().map(|n| n.name().into_owned()).collect()).unwrap()
+    };
+    let (partner, stranger) = if joined == Some(graph_a) { (0, 2) } else { (2, 0) };
+    assert_eq!(sim.agents[1].digest(), sim.agents[partner].digest(), "agent 2 converged with its graph");
+    let writes_of = |index: usize| format!("n{index}_");
+    for index in [1, partner] {
+        let held = names(index);
+        assert!(!held.iter().any(|n| n.starts_with(&writes_of(stranger))), "agent {index} holds a foreign write");
+        assert!(
+            held.iter().any(|n| n.starts_with(&writes_of(1)))
+                && held.iter().any(|n| n.starts_with(&writes_of(partner)))
+        );
+    }
+    assert!(!names(stranger).iter().any(|n| n.starts_with("n1_") || n.starts_with(&writes_of(partner))));
+    for agent in &sim.agents {
+        let status = agent.status();
+        assert_eq!(status.foreign_graphs.len(), 1, "one foreign graph heard: {status:?}");
+        assert!(status.foreign_refused > 0);
+        assert_ne!(status.foreign_graphs[0], status.graph.unwrap());
+    }
 }

@@ -352,7 +352,7 @@ async function start() {
   es.addEventListener('patch', (m) => onPatch(JSON.parse(m.data)));
   es.addEventListener('debug', (m) => { S.debug = JSON.parse(m.data); if ($('view-debug').classList.contains('on')) drawDebug(); });
   es.addEventListener('status', (m) => { const s = JSON.parse(m.data); const a = s.agent;
-    $('status').textContent = `${a.agent} · ${a.ready ? 'ready' : 'joining'} · ${a.nodes} nodes, ${a.edges} edges · peers ${a.peers.length} · ` +
+    $('status').textContent = `${a.agent} · graph ${a.graph || '(joining)'}` + (a.foreign_refused ? ` · ${a.foreign_refused} foreign refused` : '') + ` · ${a.ready ? 'ready' : 'joining'} · ${a.nodes} nodes, ${a.edges} edges · peers ${a.peers.length} · ` +
       `${S.patches} patches · coalesced ${s.stream ? s.stream.coalesced : 0} · resyncs ${s.stream ? s.stream.resyncs : 0}` + (S.config.allow_edit ? ' · editing on' : ' · read-only'); });
   es.onerror = () => { $('status').textContent = 'disconnected — retrying…'; };
   window.inspector = S;

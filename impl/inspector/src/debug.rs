@@ -270,7 +270,12 @@ mod tests {
     fn another_agents_runtime_lists_marks_and_draws_through_calls() {
         let bus = Bus::new();
         let agent = |id: u32| {
-            let config = AgentConfig { join_wait: Duration::from_millis(50), ..AgentConfig::new(AgentId(id)) };
+            // Both start alone at once: one graph, named (each would otherwise create its own).
+            let config = AgentConfig {
+                join_wait: Duration::from_millis(50),
+                graph: agent::GraphId::new(0x1d),
+                ..AgentConfig::new(AgentId(id))
+            };
             Arc::new(Agent::start(config, bus.attach(1024), Arc::new(SystemClock)).unwrap())
         };
         let (inspector, role, plain) = (agent(1), agent(2), agent(3));

@@ -106,6 +106,10 @@ pub struct FeedStatus {
     pub agent: String,
     /// Whether the agent has its graph.
     pub ready: bool,
+    /// The graph id (16 hex digits), once known.
+    pub graph: Option<String>,
+    /// Messages of other graphs on the same domain and prefix refused.
+    pub foreign_refused: u64,
     /// Visible nodes.
     pub nodes: usize,
     /// Visible edges.
@@ -171,6 +175,8 @@ impl<T: Transport + 'static> GraphFeed for Agent<T> {
         FeedStatus {
             agent: status.id.to_string(),
             ready: status.ready,
+            graph: status.graph.map(|graph| graph.to_string()),
+            foreign_refused: status.foreign_refused,
             nodes: status.nodes,
             edges: status.edges,
             peers: status.peers.iter().map(|p| p.0).collect(),

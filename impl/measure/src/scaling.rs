@@ -15,7 +15,7 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use agent::envelope::Message;
+use agent::envelope::Envelope;
 use agent::{Agent, AgentConfig, AgentId};
 use anyhow::Context as _;
 use bytes::Bytes;
@@ -46,7 +46,7 @@ struct Counted {
 
 impl Counted {
     fn count(&self, bytes: &Bytes, sent: bool) {
-        let kind = Message::decode(bytes).map_or(NOT_AN_ENVELOPE, |message| message.kind());
+        let kind = Envelope::decode(bytes).map_or(NOT_AN_ENVELOPE, |envelope| envelope.message.kind());
         let mut tally = self.tally.lock().unwrap_or_else(|p| p.into_inner());
         let entry = tally.entry(kind).or_default();
         let len = bytes.len() as u64;

@@ -137,6 +137,8 @@ mod tests {
             let config = AgentConfig {
                 join_wait: Duration::from_millis(10),
                 nonce: Some(u64::from(id)),
+                // Both start alone at once: one graph, named (each would otherwise create its own).
+                graph: agent::GraphId::new(0x9e),
                 ..AgentConfig::new(AgentId(id))
             };
             Arc::new(Agent::new(config, bus.attach(1024), Arc::new(clock.clone()) as Arc<dyn Clock>).unwrap())

@@ -125,7 +125,9 @@ use settings::best_effort_max_bytes;
 pub use discovery::DiscoveryTimes;
 pub use engine::EngineWatch;
 pub use payload::{OctetsAdapter, OctetsDecoder, Payload, PayloadError, estimated_wire_bytes};
-pub use settings::{Multicast, RtpsConfig, UpdateDelivery, loopback_multicast_capable, qos, routable_ipv4_addresses};
+pub use settings::{
+    Multicast, RtpsConfig, SecurityFiles, UpdateDelivery, loopback_multicast_capable, qos, routable_ipv4_addresses,
+};
 
 /// One writer and one reader per channel: the writers in a publishing DDS participant, the readers in a subscribing
 /// one (the same participant if [`RtpsConfig::separate_reader_participant`] is off). If `rustdds`'s own threads

@@ -31,7 +31,8 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
         "pkts/upd"
     );
     for run in &result.runs {
-        for (who, f) in [("agent", &run.agent), ("raw rustdds", &run.raw)] {
+        let secured = run.secured.as_ref().map(|f| ("agent, DDS Security", f));
+        for (who, f) in [("agent", &run.agent), ("raw rustdds", &run.raw)].into_iter().chain(secured) {
             let (socket_bytes, packets) = match &f.socket {
                 Some(s) => (format!("{:.1}", s.bytes_per_update), format!("{:.2}", s.packets_per_update)),
                 None => ("-".into(), "-".into()),
@@ -46,6 +47,18 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
     }
     for run in &result.runs {
         println!("{} updates: agent p50 / raw p50 = {:.2}", run.updates, run.p50_ratio);
+        if let (Some(p50), Some(p99), Some(secured)) = (run.secured_p50_ratio, run.secured_p99_ratio, &run.secured) {
+            let bytes = |f: &measure::bench::rtt::RttFigures| f.socket.as_ref().map(|s| s.bytes_per_update);
+            let socket = match (bytes(secured), bytes(&run.agent)) {
+                (Some(s), Some(a)) => format!(", socket B/upd {:.2}x", s / a.max(1.0)),
+                _ => String::new(),
+            };
+            println!(
+                "{} updates: protected / unprotected agent: p50 {p50:.2}x, p99 {p99:.2}x{socket} (DDS Security, \
+                 submessages encrypted with AES-GCM)",
+                run.updates
+            );
+        }
     }
     match counting {
         Counting::Socket => rtt_socket(result),
@@ -55,7 +68,9 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
 
 fn rtt_socket(result: &RttResult) {
     for run in &result.runs {
-        for (who, f) in [("agent (discovery + join)", &run.agent), ("raw rustdds (discovery)", &run.raw)] {
+        let secured = run.secured.as_ref().map(|f| ("agent with DDS Security (discovery + handshake + join)", f));
+        let loops = [("agent (discovery + join)", &run.agent), ("raw rustdds (discovery)", &run.raw)];
+        for (who, f) in loops.into_iter().chain(secured) {
             if let Some(s) = &f.socket {
                 println!(
                     "{who}, {}: {} B in {} packets before the first echo; steady state {} B in {} packets \
@@ -91,6 +106,20 @@ pub(super) fn join(result: &JoinResult) {
     );
     breakdown(&result.breakdown);
     println!("  load average: {}", loadavg());
+}
+
+/// The protected join's total and discovery against the unprotected join's.
+pub(super) fn join_ratio(plain: &JoinResult, secured: &JoinResult) {
+    let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) if b > 0.0 => format!("{:.2}x", a / b),
+        _ => "-".into(),
+    };
+    println!(
+        "protected / unprotected join: total {}, discovery {}, request → ready {}",
+        ratio(secured.breakdown.total_ms, plain.breakdown.total_ms),
+        ratio(secured.breakdown.discovery_ms, plain.breakdown.discovery_ms),
+        ratio(secured.breakdown.request_to_ready_ms, plain.breakdown.request_to_ready_ms)
+    );
 }
 
 fn breakdown(b: &JoinBreakdown) {

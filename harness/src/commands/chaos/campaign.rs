@@ -19,7 +19,7 @@ use anyhow::{Context, Result, bail};
 use transport::rng::SplitMix64;
 
 use super::net::{Filter, Network};
-use super::procs::{Launch, Line, Proc, log_tail};
+use super::procs::{Launch, Line, Proc, identity, log_tail};
 use agent::StatusLine;
 use measure::units::ms_from_duration;
 
@@ -86,7 +86,25 @@ impl Campaign {
         let history = std::io::BufWriter::new(
             std::fs::File::create(&history_path).with_context(|| format!("creating {}", history_path.display()))?,
         );
+        let security = if config.security {
+            let pki = dir.join("pki");
+            let _ = std::fs::remove_dir_all(&pki);
+            let init = crate::commands::security::InitArgs {
+                dir: pki.clone(),
+                agents: (0..config.agents).map(identity).collect(),
+                readers: Vec::new(),
+                expired: Vec::new(),
+                topic_prefix: "*".into(),
+                protection: crate::commands::security::Protection::Encrypt,
+                days: 2,
+            };
+            crate::commands::security::init(&init).context("making the campaign's PKI")?;
+            Some(pki)
+        } else {
+            None
+        };
         let launch = Launch {
+            security,
             program,
             domain: config.domain,
             join_wait_ms: config.join_wait_ms,

@@ -76,6 +76,10 @@ pub struct ChaosArgs {
     /// and summary.json/summary.md.
     #[arg(long, default_value = "chaos-out")]
     pub out: PathBuf,
+    /// Run every agent with DDS Security (a fresh test PKI per campaign, one identity per slot, submessages
+    /// encrypted): the same faults and checks on a secured graph.
+    #[arg(long)]
+    pub security: bool,
     /// Plant this protocol bug in every agent (an `agent::mutants::ProtocolMutant` name, e.g.
     /// `IncarnationForgotten`), to check that the campaign catches it. Only in a build with the `mutants` feature.
     #[cfg(feature = "mutants")]
@@ -150,6 +154,7 @@ fn run_one(
         settle_ms: args.settle_ms,
         join_wait_ms: args.join_wait_ms,
         domain: args.domain,
+        security: args.security,
         #[cfg(feature = "mutants")]
         plant: args.plant.clone(),
     };

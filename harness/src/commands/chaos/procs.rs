@@ -40,6 +40,9 @@ pub struct Launch {
     pub image_bytes: usize,
     /// The campaign's directory (agent logs and incarnation records go under it).
     pub dir: PathBuf,
+    /// The campaign's PKI (`cortex security init`), when its agents run with DDS Security: slot N uses the
+    /// credentials of [`identity`]`(N)`.
+    pub security: Option<PathBuf>,
     /// A protocol bug to plant in every agent.
     #[cfg(feature = "mutants")]
     pub plant: Option<String>,
@@ -76,10 +79,16 @@ impl Proc {
             .arg("chaos-agent")
             .args(["--id", &slot.to_string(), "--domain", &launch.domain.to_string()])
             .args(["--join-wait-ms", &launch.join_wait_ms.to_string()])
+            // One graph, named: a life that starts alone (a restart with no reachable peer, a late join across a
+            // partition) is still of the campaign's graph.
+            .args(["--graph-id", &agent::GraphId::from_nonce(u64::from(launch.domain)).to_string()])
             .args(["--status-ms", &launch.status_ms.to_string()])
             .args(["--image-bytes", &launch.image_bytes.to_string()])
             .arg("--life-file")
             .arg(life_file(&launch.dir, slot));
+        if let Some(pki) = &launch.security {
+            command.arg("--security").arg(pki.join(identity(slot)));
+        }
         #[cfg(feature = "mutants")]
         if let Some(name) = &launch.plant {
             command.args(["--plant", name]);
@@ -140,6 +149,11 @@ impl Proc {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// The name of slot `slot`'s identity in the campaign's PKI.
+pub fn identity(slot: usize) -> String {
+    format!("slot{slot}")
 }
 
 /// The incarnation record of agent slot `slot`, kept across its lives.

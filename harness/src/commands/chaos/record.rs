@@ -27,6 +27,9 @@ pub struct CampaignConfig {
     pub join_wait_ms: u64,
     /// DDS domain.
     pub domain: u16,
+    /// Whether the agents ran with DDS Security.
+    #[serde(default)]
+    pub security: bool,
     /// A protocol bug planted in every agent (tests of the campaign itself).
     #[cfg(feature = "mutants")]
     #[serde(default, skip_serializing_if = "Option::is_none")]

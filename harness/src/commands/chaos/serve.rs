@@ -28,6 +28,12 @@ pub struct ChaosAgentArgs {
     /// Topic name prefix.
     #[arg(long, default_value = "dsr")]
     pub topic_prefix: String,
+    /// The graph the agent belongs to (see `cortex agent --graph-id`).
+    #[arg(long)]
+    pub graph_id: Option<agent::GraphId>,
+    /// DDS Security credentials (a participant directory of `cortex security init`).
+    #[arg(long)]
+    pub security: Option<PathBuf>,
     /// The incarnation record of this agent (kept across its restarts).
     #[arg(long)]
     pub life_file: PathBuf,
@@ -62,10 +68,16 @@ pub fn protocol_mutant(name: &str) -> Result<agent::mutants::ProtocolMutant> {
 
 /// Runs `cortex chaos-agent`.
 pub fn run(args: ChaosAgentArgs) -> Result<()> {
-    let rtps = RtpsConfig { domain_id: args.domain, topic_prefix: args.topic_prefix.clone(), ..RtpsConfig::default() };
+    let rtps = RtpsConfig {
+        domain_id: args.domain,
+        topic_prefix: args.topic_prefix.clone(),
+        security: crate::commands::agent::security_files(args.security.as_deref())?,
+        ..RtpsConfig::default()
+    };
     let mut config = AgentConfig::new(AgentId(args.id));
     config.join_wait = Duration::from_millis(args.join_wait_ms);
     config.life_file = Some(args.life_file.clone());
+    config.graph = args.graph_id;
     #[cfg(feature = "mutants")]
     if let Some(name) = &args.plant {
         config.plant = agent::mutants::Plant::of(Some(protocol_mutant(name)?));

@@ -115,6 +115,19 @@ impl Input {
         Decoded { input, rejected }
     }
 
+    /// The message kind's name (as [`Message::kind`]).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Input::Delta { .. } => "delta",
+            Input::Announce { .. } => "announce",
+            Input::MissingRequest { .. } => "missing-request",
+            Input::Deltas { .. } => "deltas",
+            Input::Snapshot { .. } => "snapshot",
+            Input::GraphRequest { .. } => "graph-request",
+            Input::GraphAnswer { .. } => "graph-answer",
+        }
+    }
+
     /// The sender.
     pub fn from(&self) -> AgentId {
         match self {

@@ -9,6 +9,7 @@ use transport::Channel;
 use super::{AgentCore, Caches, Dest, Event, MAX_ANSWERED, Output};
 use crate::AgentId;
 use crate::envelope::Message;
+use crate::graph_id::GraphId;
 
 impl AgentCore {
     pub(super) fn answer_graph_request(&mut self, from: AgentId, nonce: u64, now_ns: u64, out: &mut Output) {
@@ -42,6 +43,7 @@ impl AgentCore {
         replica.set_log_limits(self.config.log_limits);
         replica.set_change_tracking(true);
         let alone = snapshot.is_none();
+        let graph = *self.graph.get_or_insert_with(|| GraphId::from_nonce(self.life.nonce));
         let mut seed_nodes = None;
         if let Some(snapshot) = snapshot {
             if let Err(error) = replica.apply_shared(snapshot) {
@@ -61,10 +63,18 @@ impl AgentCore {
                 Err(error) => out.events.push(Event::SeedRefused { error: error.to_string() }),
             }
         }
-        out.events.push(Event::Ready { replica: replica.id(), incarnation, alone, seed_nodes });
+        out.events.push(Event::Ready { graph, replica: replica.id(), incarnation, alone, seed_nodes });
         self.replica = Some(replica);
         self.caches.0 = Caches::default();
-        let buffered: Vec<Arc<Delta>> = std::mem::take(&mut self.buffered).into();
-        self.apply("buffered delta", buffered, out);
+        // Deltas buffered from another graph while this life did not know its own are refused now.
+        let mut buffered = Vec::with_capacity(self.buffered.len());
+        for (theirs, from, delta) in std::mem::take(&mut self.buffered) {
+            if theirs == graph {
+                buffered.push(delta);
+            } else {
+                self.refuse_foreign(theirs, from, "buffered delta", Some(graph), out);
+            }
+        }
+        self.apply("buffered delta", None, buffered, out);
     }
 }

@@ -9,6 +9,7 @@ use transport::Channel;
 
 use crate::AgentId;
 use crate::envelope::Message;
+use crate::graph_id::GraphId;
 
 /// Where a message goes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -28,6 +29,16 @@ pub struct Send {
     pub message: Message,
     /// Where it goes.
     pub dest: Dest,
+    /// The sender's graph, carried in the envelope (`None` only in the graph request of a joiner that names no
+    /// graph).
+    pub graph: Option<GraphId>,
+}
+
+impl Send {
+    /// The sample's bytes: the message in its envelope, with the graph id.
+    pub fn encode(&self) -> Bytes {
+        self.message.encode(self.graph)
+    }
 }
 
 /// Something the shell should tell a person, count or act on.
@@ -42,8 +53,11 @@ pub enum Event {
     },
     /// A graph request went out while joining.
     GraphRequested,
-    /// This life became ready as `replica`. The shell records `incarnation` before this life's first write.
+    /// This life became ready as `replica` of graph `graph`. The shell records `incarnation` (and the graph)
+    /// before this life's first write.
     Ready {
+        /// The graph it belongs to: its own (named in the settings), the one it joined, or one it created alone.
+        graph: GraphId,
         /// This life's replica id.
         replica: ReplicaId,
         /// Its incarnation.
@@ -92,6 +106,18 @@ pub enum Event {
     },
     /// No incarnation is left for a new life (more than 2^20 lives of this agent id).
     IncarnationsExhausted,
+    /// A message of another graph was refused (reported once per foreign graph id; later ones are only counted,
+    /// see [`super::AgentCore::foreign_refused`]).
+    ForeignGraph {
+        /// The foreign graph.
+        graph: GraphId,
+        /// The agent that sent the first refused message of it.
+        from: AgentId,
+        /// That message's kind.
+        kind: &'static str,
+        /// This agent's graph (`None` while it joins without naming one).
+        mine: Option<GraphId>,
+    },
 }
 
 /// What one call of the core asks its runtime to do.
@@ -106,8 +132,17 @@ pub struct Output {
 }
 
 impl Output {
+    /// Queues a message; its graph id is stamped by [`Output::stamp`] when the core returns.
     pub(super) fn send(&mut self, channel: Channel, message: Message, dest: Dest) {
-        self.sends.push(Send { channel, message, dest });
+        self.sends.push(Send { channel, message, dest, graph: None });
+    }
+
+    /// Stamps every queued message with the sender's graph.
+    pub(super) fn stamp(mut self, graph: Option<GraphId>) -> Output {
+        for send in &mut self.sends {
+            send.graph = graph;
+        }
+        self
     }
 }
 
@@ -116,6 +151,8 @@ impl Output {
 pub struct Written {
     /// The writer.
     pub from: AgentId,
+    /// The writer's graph.
+    pub graph: GraphId,
     /// The deltas of the operation, in order.
     pub deltas: Vec<Arc<Delta>>,
     /// The replica's change events.
@@ -128,7 +165,12 @@ impl Written {
         let encode = |delta: &Arc<Delta>| Message::Delta { from: self.from, delta: Bytes::from(delta.encode()) };
         self.deltas
             .iter()
-            .map(|delta| Send { channel: Channel::Updates, message: encode(delta), dest: Dest::All })
+            .map(|delta| Send {
+                channel: Channel::Updates,
+                message: encode(delta),
+                dest: Dest::All,
+                graph: Some(self.graph),
+            })
             .collect()
     }
 }

@@ -1,6 +1,7 @@
 //! The protocol's settings and limits, and what a new life starts from.
 
 use crate::AgentId;
+use crate::graph_id::GraphId;
 use crate::mutants::Plant;
 use dsr::LogLimits;
 
@@ -13,12 +14,19 @@ pub const RANDOM_FLOOR_LIMIT: u32 = 1 << 16;
 /// Above this many payload bytes of retained deltas, a missing-request is answered with a snapshot instead when the
 /// snapshot is smaller: the history keeps every overwritten camera frame, a snapshot only the current ones.
 pub const SNAPSHOT_IF_SMALLER_ABOVE_BYTES: usize = 1 << 20;
+/// Most foreign graph ids remembered (each reported once); messages of further ones are refused and counted without
+/// a report.
+pub const MAX_FOREIGN_GRAPHS: usize = 64;
 
 /// The protocol's settings, in nanoseconds.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct ProtocolConfig {
     /// This agent's id (below [`AgentId::LIMIT`]).
     pub id: AgentId,
+    /// The graph this agent belongs to: it joins only this graph, and creates it with this id when it starts alone.
+    /// `None`: it takes the graph of the first answer to its graph request (or creates one with an id drawn from
+    /// its life's nonce when it starts alone).
+    pub graph: Option<GraphId>,
     /// How long to wait for a graph from peers before starting alone.
     pub join_wait_ns: u64,
     /// How often to repeat the graph request while joining.

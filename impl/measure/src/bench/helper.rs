@@ -44,21 +44,38 @@ impl Drop for Helper {
 }
 
 /// `bench echo`: echoes pings, raw samples or through an agent.
-pub fn echo_args(domain: u16, prefix: &str, raw: bool, multicast: Multicast, updates: UpdateDelivery) -> Vec<String> {
+/// With `security`, the helper joins with DDS Security's credentials in that directory.
+pub fn echo_args(
+    domain: u16,
+    prefix: &str,
+    raw: bool,
+    multicast: Multicast,
+    updates: UpdateDelivery,
+    security: Option<&Path>,
+) -> Vec<String> {
     let mut args = vec!["bench".into(), "echo".into(), "--domain".into(), domain.to_string(), "--prefix".into()];
     args.push(prefix.into());
     if raw {
         args.push("--raw".into());
     }
     args.extend(["--multicast".into(), multicast_name(multicast).into(), "--updates".into(), updates.name().into()]);
+    args.extend(security_args(security));
     args
 }
 
-/// `bench join-child`: joins, then prints its [`super::join::JoinChildReport`] as one JSON line.
-pub fn join_child_args(domain: u16, prefix: &str, nodes: u32) -> Vec<String> {
-    ["bench", "join-child", "--domain", &domain.to_string(), "--prefix", prefix, "--nodes", &nodes.to_string()]
-        .map(String::from)
-        .to_vec()
+fn security_args(security: Option<&Path>) -> Vec<String> {
+    security.map(|dir| vec!["--security".to_owned(), dir.display().to_string()]).unwrap_or_default()
+}
+
+/// `bench join-child`: joins (with DDS Security's credentials in `security`, if given), then prints its
+/// [`super::join::JoinChildReport`] as one JSON line.
+pub fn join_child_args(domain: u16, prefix: &str, nodes: u32, security: Option<&Path>) -> Vec<String> {
+    let mut args: Vec<String> =
+        ["bench", "join-child", "--domain", &domain.to_string(), "--prefix", prefix, "--nodes", &nodes.to_string()]
+            .map(String::from)
+            .to_vec();
+    args.extend(security_args(security));
+    args
 }
 
 /// `bench fanout-reader`: counts the fan-out's samples and reports the count.
@@ -76,9 +93,13 @@ mod tests {
 
     #[test]
     fn helper_command_lines_name_every_setting() {
-        let echo = echo_args(3, "p", true, Multicast::Off, UpdateDelivery::Reliable);
+        let echo = echo_args(3, "p", true, Multicast::Off, UpdateDelivery::Reliable, None);
         assert_eq!(echo.join(" "), "bench echo --domain 3 --prefix p --raw --multicast off --updates reliable");
-        assert_eq!(join_child_args(1, "j", 10).join(" "), "bench join-child --domain 1 --prefix j --nodes 10");
+        assert_eq!(join_child_args(1, "j", 10, None).join(" "), "bench join-child --domain 1 --prefix j --nodes 10");
+        assert_eq!(
+            join_child_args(1, "j", 10, Some(Path::new("/k/b"))).join(" "),
+            "bench join-child --domain 1 --prefix j --nodes 10 --security /k/b"
+        );
         assert_eq!(
             fanout_reader_args(2, "f", Multicast::On).join(" "),
             "bench fanout-reader --domain 2 --prefix f --multicast on"

@@ -15,7 +15,7 @@ use transport::rtps::{DiscoveryTimes, Multicast, UpdateDelivery};
 use transport::{Channel, Clock, SystemClock, Transport};
 
 use super::helper::{self, Helper};
-use super::{loadavg, rtps};
+use super::{Credentials, loadavg, rtps_secured};
 use crate::units::ms_from_duration;
 
 /// What `cortex bench join --json` prints.
@@ -150,8 +150,8 @@ fn agent_config(id: u32, join_wait: Duration) -> AgentConfig {
     config
 }
 
-fn transport(domain: u16, prefix: &str) -> anyhow::Result<transport::rtps::RtpsTransport> {
-    rtps(domain, prefix, Multicast::Auto, UpdateDelivery::Reliable)
+fn transport(domain: u16, prefix: &str, security: Option<&Path>) -> anyhow::Result<transport::rtps::RtpsTransport> {
+    rtps_secured(domain, prefix, Multicast::Auto, UpdateDelivery::Reliable, security)
 }
 
 /// Builds the join benchmark's graph: a tree with 6 attributes and one RT edge per node.
@@ -184,14 +184,14 @@ fn build_tree<T: Transport>(agent: &Agent<T>, nodes: u32) -> anyhow::Result<()> 
 }
 
 /// Builds a graph of `nodes` nodes in an agent of this process on `domain`, times its snapshot here, then starts
-/// `program` as the joining process and breaks its join down.
+/// `program` as the joining process and breaks its join down. With `security`, both agents use DDS Security.
 ///
 /// # Errors
 /// An agent that cannot start, a graph that cannot be built or encoded, or a joining process that reports nothing.
-pub fn run(nodes: u32, domain: u16, program: &Path) -> anyhow::Result<JoinResult> {
-    let prefix = format!("join{}", std::process::id());
-    let agent =
-        Agent::start(agent_config(1, Duration::from_millis(300)), transport(domain, &prefix)?, Arc::new(SystemClock))?;
+pub fn run(nodes: u32, domain: u16, program: &Path, security: Option<&Credentials>) -> anyhow::Result<JoinResult> {
+    let prefix = format!("join{}{}", std::process::id(), if security.is_some() { "sec" } else { "" });
+    let transport = transport(domain, &prefix, security.map(|c| c.this.as_path()))?;
+    let agent = Agent::start(agent_config(1, Duration::from_millis(300)), transport, Arc::new(SystemClock))?;
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the first agent did not start");
     }
@@ -210,7 +210,8 @@ pub fn run(nodes: u32, domain: u16, program: &Path) -> anyhow::Result<JoinResult
     let rebuilt = encoded + started.elapsed();
     // A new agent process joins; both processes read the system clock, so their times compare.
     let spawned_at_ns = SystemClock.now_ns();
-    let mut helper = Helper::spawn(program, &helper::join_child_args(domain, &prefix, nodes))?;
+    let args = helper::join_child_args(domain, &prefix, nodes, security.map(|c| c.helper.as_path()));
+    let mut helper = Helper::spawn(program, &args)?;
     let stdout = helper.take_stdout().context("the joining process's standard output")?;
     let line = BufReader::new(stdout).lines().next().context("the joining process printed nothing")??;
     let child: JoinChildReport = serde_json::from_str(&line).context("the joining process's report")?;
@@ -229,13 +230,18 @@ pub fn run(nodes: u32, domain: u16, program: &Path) -> anyhow::Result<JoinResult
 }
 
 /// The joining process (the helper of `bench join-child`): an agent on `domain` that joins and waits for the graph
-/// (60 s at most), then reports its milestones. `expected_nodes` is what the graph should hold.
+/// (60 s at most), then reports its milestones. `expected_nodes` is what the graph should hold. With `security`, it joins with DDS Security.
 ///
 /// # Errors
 /// The transport or agent cannot start, or no graph arrives within 60 s.
-pub fn child(domain: u16, prefix: &str, expected_nodes: usize) -> anyhow::Result<JoinChildReport> {
+pub fn child(
+    domain: u16,
+    prefix: &str,
+    expected_nodes: usize,
+    security: Option<&Path>,
+) -> anyhow::Result<JoinChildReport> {
     let main_ns = SystemClock.now_ns();
-    let transport = transport(domain, prefix)?;
+    let transport = transport(domain, prefix, security)?;
     let participant_ns = transport.discovery().created_ns;
     let agent = Agent::start(agent_config(2, Duration::from_secs(60)), transport, Arc::new(SystemClock))?;
     if !agent.wait_ready(Duration::from_secs(60)) {

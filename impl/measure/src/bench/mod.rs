@@ -86,14 +86,36 @@ fn seq_of(bytes: &[u8]) -> Option<u64> {
 
 /// A transport on `domain` with topics of `prefix`.
 fn rtps(domain: u16, prefix: &str, multicast: Multicast, updates: UpdateDelivery) -> anyhow::Result<RtpsTransport> {
+    rtps_secured(domain, prefix, multicast, updates, None)
+}
+
+/// As [`rtps`], with DDS Security's credentials in `security` (a `transport::rtps::SecurityFiles` directory).
+fn rtps_secured(
+    domain: u16,
+    prefix: &str,
+    multicast: Multicast,
+    updates: UpdateDelivery,
+    security: Option<&std::path::Path>,
+) -> anyhow::Result<RtpsTransport> {
     RtpsTransport::new(RtpsConfig {
         domain_id: domain,
         topic_prefix: prefix.into(),
         multicast,
         updates,
+        security: security.map(|dir| transport::rtps::SecurityFiles { dir: dir.to_path_buf() }),
         ..RtpsConfig::default()
     })
     .context("joining the DDS domain")
+}
+
+/// The DDS Security credentials of the two sides of a protected measurement (`cortex security init`'s
+/// participant directories): the measuring process's and its helper's.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Credentials {
+    /// The measuring process (the pinging agent, the serving agent).
+    pub this: std::path::PathBuf,
+    /// The helper process (the echoing agent, the joining agent).
+    pub helper: std::path::PathBuf,
 }
 
 #[cfg(test)]

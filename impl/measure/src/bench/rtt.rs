@@ -15,7 +15,7 @@ use transport::rtps::{Multicast, UpdateDelivery};
 use transport::{Channel, SystemClock, Transport};
 
 use super::helper::{self, Helper};
-use super::{Counting, growth, payload_of, rtps, seq_of};
+use super::{Counting, Credentials, growth, payload_of, rtps, rtps_secured, seq_of};
 use crate::netns::LoopbackCounters;
 
 /// Pings sent before the measured ones.
@@ -40,6 +40,8 @@ pub struct RttConfig {
     pub multicast: Multicast,
     /// Deliveries of updates to compare, each measured raw and through agents, in this order.
     pub updates: Vec<UpdateDelivery>,
+    /// Also through agents protected by DDS Security with these credentials, beside the unprotected agents.
+    pub security: Option<Credentials>,
 }
 
 /// What `cortex bench rtt --json` prints.
@@ -70,6 +72,12 @@ pub struct RttRun {
     pub raw: RttFigures,
     /// Agent p50 over raw p50.
     pub p50_ratio: f64,
+    /// Through agents protected by DDS Security (with `--security`).
+    pub secured: Option<RttFigures>,
+    /// Protected agent p50 over unprotected agent p50.
+    pub secured_p50_ratio: Option<f64>,
+    /// Protected agent p99 over unprotected agent p99.
+    pub secured_p99_ratio: Option<f64>,
 }
 
 /// Figures of one ping-pong loop.
@@ -202,11 +210,22 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
     for &updates in &config.updates {
         let raw = raw(config, updates, period, counting, program)
             .with_context(|| format!("raw rustdds ping-pong, {} updates", updates.name()))?;
-        let agent = through_agents(config, updates, period, counting, program)
+        let agent = through_agents(config, updates, period, counting, program, None)
             .with_context(|| format!("agent ping-pong, {} updates", updates.name()))?;
+        let secured = match &config.security {
+            Some(credentials) => Some(
+                through_agents(config, updates, period, counting, program, Some(credentials))
+                    .with_context(|| format!("agent ping-pong with DDS Security, {} updates", updates.name()))?,
+            ),
+            None => None,
+        };
+        let ratio = |a: u64, b: u64| a as f64 / b.max(1) as f64;
         runs.push(RttRun {
             updates: updates.name(),
-            p50_ratio: agent.p50_us as f64 / raw.p50_us.max(1) as f64,
+            p50_ratio: ratio(agent.p50_us, raw.p50_us),
+            secured_p50_ratio: secured.as_ref().map(|s| ratio(s.p50_us, agent.p50_us)),
+            secured_p99_ratio: secured.as_ref().map(|s| ratio(s.p99_us, agent.p99_us)),
+            secured,
             agent,
             raw,
         });
@@ -231,7 +250,7 @@ fn raw(
     let prefix = format!("rawrtt{}{}", std::process::id(), updates.name().replace('-', ""));
     let start = counting.counters()?;
     let transport = rtps(config.domain_id, &prefix, config.multicast, updates)?;
-    let args = helper::echo_args(config.domain_id, &prefix, true, config.multicast, updates);
+    let args = helper::echo_args(config.domain_id, &prefix, true, config.multicast, updates, None);
     let _helper = Helper::spawn(program, &args)?;
     // Discovery: probe until an echo comes back.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -283,21 +302,28 @@ fn through_agents(
     period: Duration,
     counting: &Counting,
     program: &Path,
+    security: Option<&Credentials>,
 ) -> anyhow::Result<RttFigures> {
-    let prefix = format!("agentrtt{}{}", std::process::id(), updates.name().replace('-', ""));
+    let secured = if security.is_some() { "sec" } else { "" };
+    let prefix = format!("agentrtt{}{}{secured}", std::process::id(), updates.name().replace('-', ""));
     let start = counting.counters()?;
-    let agent = Agent::start(
-        bench_config(1, Duration::from_millis(300)),
-        rtps(config.domain_id, &prefix, config.multicast, updates)?,
-        Arc::new(SystemClock),
-    )?;
+    let transport =
+        rtps_secured(config.domain_id, &prefix, config.multicast, updates, security.map(|c| c.this.as_path()))?;
+    let agent = Agent::start(bench_config(1, Duration::from_millis(300)), transport, Arc::new(SystemClock))?;
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the pinging agent did not start");
     }
     let ping = agent.insert_node(NewNode::new("object", PING))?;
     let pong = agent.insert_node(NewNode::new("object", PONG))?;
     let signals = agent.subscribe(100_000);
-    let args = helper::echo_args(config.domain_id, &prefix, false, config.multicast, updates);
+    let args = helper::echo_args(
+        config.domain_id,
+        &prefix,
+        false,
+        config.multicast,
+        updates,
+        security.map(|c| c.helper.as_path()),
+    );
     let _helper = Helper::spawn(program, &args)?;
     // The echo agent joins, then echoes; wait for the echo of a probe.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -354,8 +380,16 @@ fn is_pong(change: &Change, pong: NodeId) -> bool {
 ///
 /// # Errors
 /// The transport or agent cannot start, or the agent gets no graph with ping and pong nodes within 30 s.
-pub fn echo(domain: u16, prefix: &str, raw: bool, multicast: Multicast, updates: UpdateDelivery) -> anyhow::Result<()> {
-    let transport = rtps(domain, prefix, multicast, updates)?;
+/// With `security`, it joins with DDS Security's credentials in that directory.
+pub fn echo(
+    domain: u16,
+    prefix: &str,
+    raw: bool,
+    multicast: Multicast,
+    updates: UpdateDelivery,
+    security: Option<&Path>,
+) -> anyhow::Result<()> {
+    let transport = rtps_secured(domain, prefix, multicast, updates, security)?;
     if raw {
         while let Some(sample) = transport.recv_timeout(Duration::from_secs(60)) {
             transport.publish(sample.channel, sample.bytes)?;

@@ -146,6 +146,9 @@ fn join_domain(
         if let Some(addresses) = networks.clone() {
             builder = builder.with_only_networks(addresses);
         }
+        if let Some(files) = &config.security {
+            builder = secured(builder, files)?;
+        }
         builder.build().map_err(|e| TransportError::Setup {
             what: format!("{role} participant in domain {}", config.domain_id),
             detail: format!("{e:?}"),
@@ -172,6 +175,36 @@ fn join_domain(
         );
     }
     Ok((publishing, subscribing, engine))
+}
+
+/// `builder` with DDS Security's builtin plugins configured from `files`.
+#[cfg(feature = "security")]
+fn secured(
+    builder: DomainParticipantBuilder,
+    files: &super::settings::SecurityFiles,
+) -> Result<DomainParticipantBuilder, TransportError> {
+    if let Some(missing) = super::settings::SecurityFiles::FILES.iter().find(|name| !files.dir.join(name).is_file()) {
+        return Err(TransportError::Setup {
+            what: format!("DDS Security credentials in {}", files.dir.display()),
+            detail: format!("{missing} is missing"),
+        });
+    }
+    // The key is not encrypted; rustdds asks for a password all the same.
+    let configuration =
+        rustdds::DomainParticipantSecurityConfigFiles::with_ros_default_names(&files.dir, "unencrypted".into());
+    Ok(builder.builtin_security(configuration))
+}
+
+/// Without the `security` feature, credentials are refused with a clear error.
+#[cfg(not(feature = "security"))]
+fn secured(
+    _builder: DomainParticipantBuilder,
+    files: &super::settings::SecurityFiles,
+) -> Result<DomainParticipantBuilder, TransportError> {
+    Err(TransportError::Setup {
+        what: format!("DDS Security with the credentials in {}", files.dir.display()),
+        detail: "this build of the transport has no DDS Security (cargo feature `security`)".into(),
+    })
 }
 
 #[cfg(test)]

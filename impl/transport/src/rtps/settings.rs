@@ -84,6 +84,26 @@ pub struct RtpsConfig {
     pub multicast: Multicast,
     /// How samples on [`Channel::Updates`] travel: reliable like every other channel, or small ones best-effort.
     pub updates: UpdateDelivery,
+    /// DDS Security credentials: every participant of the transport authenticates with them and follows the
+    /// signed governance and permissions (needs the crate's `security` feature). `None`: no DDS Security.
+    pub security: Option<SecurityFiles>,
+}
+
+/// One participant's DDS Security credentials (OMG DDS Security 1.1 builtin plugins, as `rustdds` reads them): a
+/// directory in the layout of a ROS 2 security enclave, holding the identity CA's certificate
+/// (`identity_ca.cert.pem`), the permissions CA's certificate (`permissions_ca.cert.pem`), the signed domain
+/// governance (`governance.p7s`), and this participant's identity certificate (`cert.pem`), unencrypted private
+/// key (`key.pem`) and signed permissions (`permissions.p7s`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SecurityFiles {
+    /// The directory.
+    pub dir: std::path::PathBuf,
+}
+
+impl SecurityFiles {
+    /// The files the directory must hold.
+    pub const FILES: [&'static str; 6] =
+        ["identity_ca.cert.pem", "permissions_ca.cert.pem", "governance.p7s", "cert.pem", "key.pem", "permissions.p7s"];
 }
 
 /// How samples on [`Channel::Updates`] travel (see the module documentation, "Best-effort updates").
@@ -129,6 +149,7 @@ impl Default for RtpsConfig {
             separate_reader_participant: true,
             multicast: Multicast::Auto,
             updates: UpdateDelivery::Reliable,
+            security: None,
         }
     }
 }
