@@ -22,6 +22,9 @@ use iceoryx2::service::ipc_threadsafe;
 
 use crate::EndpointId;
 
+mod transport;
+pub use transport::ShmTransport;
+
 /// The user header of every lane sample: the sender's [`EndpointId`] as two little-endian halves (low, high).
 type EndpointHeader = [u64; 2];
 
