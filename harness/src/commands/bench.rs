@@ -155,6 +155,9 @@ pub struct RttArgs {
     /// Deliveries of updates to compare, each measured raw and through agents, in this order.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "reliable,best-effort")]
     pub updates: Vec<UpdatesArg>,
+    /// Also measure two agents over same-host shared memory (iceoryx2, `transport::shm`) in the same run.
+    #[arg(long)]
+    pub shm: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -235,6 +238,9 @@ pub struct EchoArgs {
     /// Delivery of updates.
     #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
     pub updates: UpdatesArg,
+    /// Over same-host shared memory instead of RTPS.
+    #[arg(long)]
+    pub shm: bool,
 }
 
 /// Arguments of the join helper.
@@ -257,7 +263,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Rtt(args) => run_rtt(args),
         BenchCommand::Join(args) => run_join(args),
         BenchCommand::Echo(args) => {
-            rtt::echo(args.domain, &args.prefix, args.raw, args.multicast.into(), args.updates.into())
+            rtt::echo(args.domain, &args.prefix, args.raw, args.multicast.into(), args.updates.into(), args.shm)
         }
         BenchCommand::JoinChild(args) => {
             let report = join::child(args.domain, &args.prefix, args.nodes)?;
@@ -335,6 +341,7 @@ fn run_rtt(args: RttArgs) -> Result<()> {
         domain_id: args.domain,
         multicast: args.multicast.into(),
         updates: args.updates.iter().map(|&u| u.into()).collect(),
+        shm: args.shm,
     };
     let result = rtt::run(&config, &counting, &this_program()?)?;
     if args.json {

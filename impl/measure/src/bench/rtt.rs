@@ -12,7 +12,8 @@ use dsr::{Change, Element, NewNode, NodeId, attrs};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 use transport::rtps::{Multicast, UpdateDelivery};
-use transport::{Channel, SystemClock, Transport};
+use transport::shm::{ShmSettings, ShmTransport};
+use transport::{Channel, EndpointId, SystemClock, Transport};
 
 use super::helper::{self, Helper};
 use super::{Counting, growth, payload_of, rtps, seq_of};
@@ -40,6 +41,8 @@ pub struct RttConfig {
     pub multicast: Multicast,
     /// Deliveries of updates to compare, each measured raw and through agents, in this order.
     pub updates: Vec<UpdateDelivery>,
+    /// Also measure two agents over same-host shared memory (`transport::shm::ShmTransport`) in the same run.
+    pub shm: bool,
 }
 
 /// What `cortex bench rtt --json` prints.
@@ -53,6 +56,8 @@ pub struct RttResult {
     pub count: u32,
     /// Whether the transports used multicast.
     pub multicast: bool,
+    /// Two agents over same-host shared memory, same loop (with `RttConfig::shm`).
+    pub shm_agent: Option<RttFigures>,
     /// Whether the run was in a fresh network namespace (socket-level bytes measured).
     pub netns: bool,
     /// One entry per delivery of updates.
@@ -202,7 +207,7 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
     for &updates in &config.updates {
         let raw = raw(config, updates, period, counting, program)
             .with_context(|| format!("raw rustdds ping-pong, {} updates", updates.name()))?;
-        let agent = through_agents(config, updates, period, counting, program)
+        let agent = through_agents(config, updates, period, counting, program, false)
             .with_context(|| format!("agent ping-pong, {} updates", updates.name()))?;
         runs.push(RttRun {
             updates: updates.name(),
@@ -211,7 +216,15 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
             raw,
         });
     }
+    let shm_agent = if config.shm {
+        let figures = through_agents(config, UpdateDelivery::Reliable, period, counting, program, true)
+            .context("agent ping-pong over shared memory")?;
+        Some(figures)
+    } else {
+        None
+    };
     Ok(RttResult {
+        shm_agent,
         payload: config.payload_bytes,
         rate_hz: config.rate_hz,
         count: config.count,
@@ -283,21 +296,27 @@ fn through_agents(
     period: Duration,
     counting: &Counting,
     program: &Path,
+    shm: bool,
 ) -> anyhow::Result<RttFigures> {
-    let prefix = format!("agentrtt{}{}", std::process::id(), updates.name().replace('-', ""));
+    let via = if shm { "shm" } else { "" };
+    let prefix = format!("agentrtt{}{}{via}", std::process::id(), updates.name().replace('-', ""));
     let start = counting.counters()?;
-    let agent = Agent::start(
-        bench_config(1, Duration::from_millis(300)),
-        rtps(config.domain_id, &prefix, config.multicast, updates)?,
-        Arc::new(SystemClock),
-    )?;
+    let transport: Arc<dyn Transport> = if shm {
+        Arc::new(shm_transport(&prefix, 1)?)
+    } else {
+        Arc::new(rtps(config.domain_id, &prefix, config.multicast, updates)?)
+    };
+    let agent = Agent::start(bench_config(1, Duration::from_millis(300)), transport, Arc::new(SystemClock))?;
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the pinging agent did not start");
     }
     let ping = agent.insert_node(NewNode::new("object", PING))?;
     let pong = agent.insert_node(NewNode::new("object", PONG))?;
     let signals = agent.subscribe(100_000);
-    let args = helper::echo_args(config.domain_id, &prefix, false, config.multicast, updates);
+    let mut args = helper::echo_args(config.domain_id, &prefix, false, config.multicast, updates);
+    if shm {
+        args.push("--shm".into());
+    }
     let _helper = Helper::spawn(program, &args)?;
     // The echo agent joins, then echoes; wait for the echo of a probe.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -345,6 +364,13 @@ fn through_agents(
     Ok(figures)
 }
 
+/// The shared-memory transport of the agent ping-pong's side `side` (1 pings, 2 echoes), on services of `prefix`.
+fn shm_transport(prefix: &str, side: u128) -> anyhow::Result<ShmTransport> {
+    let endpoint = EndpointId((u128::from(std::process::id()) << 8) | side);
+    ShmTransport::open(&format!("cortex/bench/{prefix}"), endpoint, &ShmSettings::default())
+        .context("opening shared memory")
+}
+
 fn is_pong(change: &Change, pong: NodeId) -> bool {
     matches!(change, Change::AttrUpdated { element: Element::Node(id), name } if *id == pong && name.as_str() == "cam_rgb")
 }
@@ -354,8 +380,16 @@ fn is_pong(change: &Change, pong: NodeId) -> bool {
 ///
 /// # Errors
 /// The transport or agent cannot start, or the agent gets no graph with ping and pong nodes within 30 s.
-pub fn echo(domain: u16, prefix: &str, raw: bool, multicast: Multicast, updates: UpdateDelivery) -> anyhow::Result<()> {
-    let transport = rtps(domain, prefix, multicast, updates)?;
+pub fn echo(
+    domain: u16,
+    prefix: &str,
+    raw: bool,
+    multicast: Multicast,
+    updates: UpdateDelivery,
+    shm: bool,
+) -> anyhow::Result<()> {
+    let transport: Arc<dyn Transport> =
+        if shm { Arc::new(shm_transport(prefix, 2)?) } else { Arc::new(rtps(domain, prefix, multicast, updates)?) };
     if raw {
         while let Some(sample) = transport.recv_timeout(Duration::from_secs(60)) {
             transport.publish(sample.channel, sample.bytes)?;
