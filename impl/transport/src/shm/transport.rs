@@ -41,8 +41,6 @@ impl ShmTransport {
     /// # Errors
     /// As [`ShmLane::open`]: shared memory unusable, a name refused, or a service of another shape.
     pub fn open(prefix: &str, id: EndpointId, settings: &ShmSettings) -> Result<Self, ShmError> {
-        let lane = |channel: Channel| ShmLane::open(&format!("{prefix}/{}", channel.name()), id, settings);
-        let lanes = [lane(Channel::Updates)?, lane(Channel::Sync)?, lane(Channel::Calls)?];
         let service = format!("{prefix}/wake");
         let open = |what: &'static str, reason: String| ShmError::Open { what, service: service.clone(), reason };
         let name: ServiceName = service
@@ -51,6 +49,14 @@ impl ShmTransport {
             .map_err(|e| ShmError::Name { name: service.clone(), reason: format!("{e:?}") })?;
         let node =
             NodeBuilder::new().create::<ipc_threadsafe::Service>().map_err(|e| open("node", format!("{e:?}")))?;
+        // A process killed without closing its ports leaves a dead node holding them (and their shared memory);
+        // reclaim those before opening, so restarts do not use up `max_endpoints`.
+        let cleaned = node.try_cleanup_dead_nodes();
+        if cleaned.cleanups + cleaned.failed_cleanups > 0 {
+            tracing::info!(cleaned = cleaned.cleanups, failed = cleaned.failed_cleanups, "dead iceoryx2 nodes");
+        }
+        let lane = |channel: Channel| ShmLane::open(&format!("{prefix}/{}", channel.name()), id, settings);
+        let lanes = [lane(Channel::Updates)?, lane(Channel::Sync)?, lane(Channel::Calls)?];
         let events = node
             .service_builder(&name)
             .event()
