@@ -1,9 +1,10 @@
 //! Shared memory between agents on one host (issue 20): one iceoryx2 publish-subscribe service per channel and
 //! graph, which the same-host agents open by name.
 //!
-//! This module is the first piece of the same-host path: [`ShmLane`] moves one channel's samples between the
-//! endpoints of one host through shared memory. It is not yet wired into an agent; `ARCHITECTURE.md` (section
-//! "Same-host shared memory") gives the design the agent integration follows.
+//! This module is the same-host path: [`ShmLane`] moves one channel's samples between the endpoints of one host
+//! through shared memory, and [`ShmTransport`] makes the three channels a [`crate::Transport`] (used by
+//! `cortex agent --transport shm`). The hybrid with RTPS (discovery, other hosts) is not written yet;
+//! `ARCHITECTURE.md` (section "Same-host shared memory") gives the design it follows.
 //!
 //! Shape of a lane sample: the sample's bytes as the transport was given them, as an iceoryx2 `[u8]` payload, with
 //! the sender's [`EndpointId`] in the sample's user header (`[u64; 2]`). iceoryx2 records the payload and header
