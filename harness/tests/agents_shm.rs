@@ -42,3 +42,24 @@ fn agents_over_shared_memory_converge_after_a_late_join_a_kill_and_restart_and_a
     let mut writer = join(8, domain, &prefix, &[&SHM[..], &["--insert-nodes", "2"]].concat(), nodes + 3);
     converge(&mut [&mut seeded, &mut again, &mut writer], nodes + 5);
 }
+
+/// Losses and duplicates on the shared-memory path (the seeded fault injector on what the joiner receives) are
+/// repaired by the anti-entropy as on RTPS: the anti-entropy does not care which path a delta took.
+#[test]
+fn agents_over_shared_memory_converge_through_injected_loss_and_duplication() {
+    let prefix = format!("shm_b{}", std::process::id());
+    let domain = 96;
+    let nodes = seed_nodes();
+    let seed = seed_path();
+    let mut seeded = spawn(
+        5,
+        domain,
+        &prefix,
+        &[&SHM[..], &["--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"]].concat(),
+    );
+    seeded.wait_ready_with(nodes);
+    let faults = ["--faults", "loss=0.3,duplicate=0.2"];
+    let mut lossy = join(7, domain, &prefix, &[&SHM[..], &faults[..], &["--insert-nodes", "5"]].concat(), nodes);
+    let mut writer = join(8, domain, &prefix, &[&SHM[..], &["--insert-nodes", "5"]].concat(), nodes);
+    converge(&mut [&mut seeded, &mut lossy, &mut writer], nodes + 10);
+}
