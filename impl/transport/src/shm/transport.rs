@@ -41,6 +41,8 @@ impl ShmTransport {
     /// # Errors
     /// As [`ShmLane::open`]: shared memory unusable, a name refused, or a service of another shape.
     pub fn open(prefix: &str, id: EndpointId, settings: &ShmSettings) -> Result<Self, ShmError> {
+        // iceoryx2's own log goes to standard error; keep it to errors (its "no config file" warning is expected).
+        iceoryx2::prelude::set_log_level(LogLevel::Error);
         let service = format!("{prefix}/wake");
         let open = |what: &'static str, reason: String| ShmError::Open { what, service: service.clone(), reason };
         let name: ServiceName = service
