@@ -113,6 +113,11 @@ pub struct AgentArgs {
     /// one graph may mix settings: each reads both.
     #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
     pub updates: UpdatesArg,
+    /// What carries the samples: `rtps` (DDS over UDP, any host), or `shm` (iceoryx2 shared memory, every agent of
+    /// the graph on this host and started with `--transport shm`; services `cortex/d<DOMAIN>/<PREFIX>/...`). The
+    /// hybrid (shared memory to same-host peers, RTPS to the others) is not written yet.
+    #[arg(long, value_enum, default_value_t = TransportArg::Rtps)]
+    pub transport: TransportArg,
     /// Where this agent records each life's incarnation (`DIR/d<DOMAIN>-<PREFIX>-a<ID>.life`), so that a restarted
     /// agent never takes an earlier life's replica id, even when no peer is reachable. Default
     /// `$XDG_STATE_HOME/cortex`, else `~/.local/state/cortex`; `none` keeps no record (a life then draws its
@@ -134,6 +139,15 @@ pub fn life_file(state_dir: Option<&str>, domain: u16, prefix: &str, id: u32) ->
         },
     };
     Some(dir.join(format!("d{domain}-{prefix}-a{id}.life")))
+}
+
+/// `--transport`: what carries an agent's samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TransportArg {
+    /// RTPS (DDS over UDP), the default.
+    Rtps,
+    /// Shared memory between the agents of one host (`transport::shm::ShmTransport`), no RTPS.
+    Shm,
 }
 
 /// `--updates`: how the transport sends [`Channel::Updates`] ([`UpdateDelivery`]).
@@ -199,6 +213,22 @@ pub fn start_rtps_agent(
     faults: Option<FaultConfig>,
     life_file: Option<PathBuf>,
 ) -> Result<Arc<Agent<AgentTransport>>> {
+    let config = agent_config(id, graph, join_wait_ms, seed_json, life_file)?;
+    agent::rtps::start(config, rtps, faults).context("joining the DDS domain")
+}
+
+/// The configuration `cortex agent` gives its agent, whatever the transport: id, graph, join wait, seed graph,
+/// life file.
+///
+/// # Errors
+/// An id out of range, an unreadable or invalid seed graph.
+fn agent_config(
+    id: u32,
+    graph: Option<GraphId>,
+    join_wait_ms: u64,
+    seed_json: Option<&std::path::Path>,
+    life_file: Option<PathBuf>,
+) -> Result<AgentConfig> {
     if id >= AgentId::LIMIT {
         bail!("--id {id} is out of range (0..{})", AgentId::LIMIT);
     }
@@ -215,7 +245,7 @@ pub fn start_rtps_agent(
         }
         config.seed = Some(reading.graph);
     }
-    agent::rtps::start(config, rtps, faults).context("joining the DDS domain")
+    Ok(config)
 }
 
 /// The transport's DDS Security settings for the credentials in `dir`, checked first
@@ -231,22 +261,33 @@ pub fn security_files(dir: Option<&std::path::Path>) -> Result<Option<transport:
 
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
-    let security = security_files(args.security.as_deref())?;
-    let agent = start_rtps_agent(
-        args.id,
-        args.graph_id,
-        args.join_wait_ms,
-        args.seed_json.as_deref(),
-        RtpsConfig {
-            domain_id: args.domain,
-            topic_prefix: args.topic_prefix.clone(),
-            updates: args.updates.into(),
-            security,
-            ..RtpsConfig::default()
-        },
-        args.faults,
-        life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id),
-    )?;
+    let life = life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id);
+    let agent = if args.transport == TransportArg::Shm {
+        if args.security.is_some() {
+            bail!("--security protects RTPS; it does not apply to --transport shm");
+        }
+        let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
+        let prefix = format!("cortex/d{}/{}", args.domain, args.topic_prefix);
+        agent::shm::start(config, &prefix, &transport::shm::ShmSettings::default(), args.faults)
+            .context("opening shared memory")?
+    } else {
+        let security = security_files(args.security.as_deref())?;
+        start_rtps_agent(
+            args.id,
+            args.graph_id,
+            args.join_wait_ms,
+            args.seed_json.as_deref(),
+            RtpsConfig {
+                domain_id: args.domain,
+                topic_prefix: args.topic_prefix.clone(),
+                updates: args.updates.into(),
+                security,
+                ..RtpsConfig::default()
+            },
+            args.faults,
+            life,
+        )?
+    };
     let stop = Arc::new(AtomicBool::new(false));
     let work = start_work(&args, &agent, &stop)?;
     {

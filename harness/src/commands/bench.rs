@@ -159,6 +159,9 @@ pub struct RttArgs {
     /// beside the unprotected ones in the same run.
     #[arg(long)]
     pub security: bool,
+    /// Also measure two agents over same-host shared memory (iceoryx2, `transport::shm`) in the same run.
+    #[arg(long)]
+    pub shm: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -245,6 +248,9 @@ pub struct EchoArgs {
     /// DDS Security credentials.
     #[arg(long)]
     pub security: Option<PathBuf>,
+    /// Over same-host shared memory instead of RTPS.
+    #[arg(long)]
+    pub shm: bool,
 }
 
 /// Arguments of the join helper.
@@ -271,7 +277,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Join(args) => run_join(args),
         BenchCommand::Echo(args) => {
             let security = args.security.as_deref();
-            rtt::echo(args.domain, &args.prefix, args.raw, args.multicast.into(), args.updates.into(), security)
+            let (multicast, updates) = (args.multicast.into(), args.updates.into());
+            rtt::echo(args.domain, &args.prefix, args.raw, multicast, updates, security, args.shm)
         }
         BenchCommand::JoinChild(args) => {
             let report = join::child(args.domain, &args.prefix, args.nodes, args.security.as_deref())?;
@@ -350,6 +357,7 @@ fn run_rtt(args: RttArgs) -> Result<()> {
         multicast: args.multicast.into(),
         updates: args.updates.iter().map(|&u| u.into()).collect(),
         security: if args.security { Some(super::security::bench_credentials()?) } else { None },
+        shm: args.shm,
     };
     let result = rtt::run(&config, &counting, &this_program()?)?;
     if args.json {

@@ -59,6 +59,7 @@ pub mod graph_id;
 pub mod life;
 pub mod mutants;
 pub mod rtps;
+pub mod shm;
 pub mod status;
 
 pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline, StatusLine};

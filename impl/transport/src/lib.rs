@@ -26,6 +26,7 @@ pub mod fault;
 pub mod inproc;
 pub mod rng;
 pub mod rtps;
+pub mod shm;
 
 /// A logical stream of samples. Each channel is its own topic on RTPS, so a large snapshot on [`Channel::Sync`]
 /// never delays a small update on [`Channel::Updates`].

@@ -45,6 +45,22 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
             );
         }
     }
+    if let Some(f) = &result.shm_agent {
+        let socket_bytes = f.socket.as_ref().map_or("-".into(), |s| format!("{:.1}", s.bytes_per_update));
+        let repairs = f.gap_requests.map_or("-".into(), |n| n.to_string());
+        println!(
+            "{:<26} {:>7} {:>7} {:>7} {:>7} {:>5} {repairs:>8} {:>14.1} {:>12} {socket_bytes:>12} {:>9}",
+            "agent, shared memory",
+            f.p50_us,
+            f.p90_us,
+            f.p99_us,
+            f.max_us,
+            f.lost,
+            f.envelope_bytes_per_update,
+            "-",
+            "-"
+        );
+    }
     for run in &result.runs {
         println!("{} updates: agent p50 / raw p50 = {:.2}", run.updates, run.p50_ratio);
         if let (Some(p50), Some(p99), Some(secured)) = (run.secured_p50_ratio, run.secured_p99_ratio, &run.secured) {

@@ -12,7 +12,8 @@ use dsr::{Change, Element, NewNode, NodeId, attrs};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 use transport::rtps::{Multicast, UpdateDelivery};
-use transport::{Channel, SystemClock, Transport};
+use transport::shm::{ShmSettings, ShmTransport};
+use transport::{Channel, EndpointId, SystemClock, Transport};
 
 use super::helper::{self, Helper};
 use super::{Counting, Credentials, growth, payload_of, rtps, rtps_secured, seq_of};
@@ -42,6 +43,8 @@ pub struct RttConfig {
     pub updates: Vec<UpdateDelivery>,
     /// Also through agents protected by DDS Security with these credentials, beside the unprotected agents.
     pub security: Option<Credentials>,
+    /// Also measure two agents over same-host shared memory (`transport::shm::ShmTransport`) in the same run.
+    pub shm: bool,
 }
 
 /// What `cortex bench rtt --json` prints.
@@ -55,6 +58,8 @@ pub struct RttResult {
     pub count: u32,
     /// Whether the transports used multicast.
     pub multicast: bool,
+    /// Two agents over same-host shared memory, same loop (with `RttConfig::shm`).
+    pub shm_agent: Option<RttFigures>,
     /// Whether the run was in a fresh network namespace (socket-level bytes measured).
     pub netns: bool,
     /// One entry per delivery of updates.
@@ -210,11 +215,11 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
     for &updates in &config.updates {
         let raw = raw(config, updates, period, counting, program)
             .with_context(|| format!("raw rustdds ping-pong, {} updates", updates.name()))?;
-        let agent = through_agents(config, updates, period, counting, program, None)
+        let agent = through_agents(config, updates, period, counting, program, Via::Rtps)
             .with_context(|| format!("agent ping-pong, {} updates", updates.name()))?;
         let secured = match &config.security {
             Some(credentials) => Some(
-                through_agents(config, updates, period, counting, program, Some(credentials))
+                through_agents(config, updates, period, counting, program, Via::Secured(credentials))
                     .with_context(|| format!("agent ping-pong with DDS Security, {} updates", updates.name()))?,
             ),
             None => None,
@@ -230,7 +235,15 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
             raw,
         });
     }
+    let shm_agent = if config.shm {
+        let figures = through_agents(config, UpdateDelivery::Reliable, period, counting, program, Via::Shm)
+            .context("agent ping-pong over shared memory")?;
+        Some(figures)
+    } else {
+        None
+    };
     Ok(RttResult {
+        shm_agent,
         payload: config.payload_bytes,
         rate_hz: config.rate_hz,
         count: config.count,
@@ -296,19 +309,43 @@ fn bench_config(id: u32, join_wait: Duration) -> AgentConfig {
     config
 }
 
+/// How the two agents of a ping-pong reach each other.
+#[derive(Clone, Copy)]
+enum Via<'a> {
+    /// RTPS, unprotected.
+    Rtps,
+    /// RTPS with DDS Security, with these credentials.
+    Secured(&'a Credentials),
+    /// Same-host shared memory.
+    Shm,
+}
+
 fn through_agents(
     config: &RttConfig,
     updates: UpdateDelivery,
     period: Duration,
     counting: &Counting,
     program: &Path,
-    security: Option<&Credentials>,
+    via: Via<'_>,
 ) -> anyhow::Result<RttFigures> {
-    let secured = if security.is_some() { "sec" } else { "" };
-    let prefix = format!("agentrtt{}{}{secured}", std::process::id(), updates.name().replace('-', ""));
+    let name = match via {
+        Via::Rtps => "",
+        Via::Secured(_) => "sec",
+        Via::Shm => "shm",
+    };
+    let prefix = format!("agentrtt{}{}{name}", std::process::id(), updates.name().replace('-', ""));
     let start = counting.counters()?;
-    let transport =
-        rtps_secured(config.domain_id, &prefix, config.multicast, updates, security.map(|c| c.this.as_path()))?;
+    let transport: Arc<dyn Transport> = match via {
+        Via::Shm => Arc::new(shm_transport(&prefix, 1)?),
+        Via::Rtps => Arc::new(rtps(config.domain_id, &prefix, config.multicast, updates)?),
+        Via::Secured(credentials) => Arc::new(rtps_secured(
+            config.domain_id,
+            &prefix,
+            config.multicast,
+            updates,
+            Some(credentials.this.as_path()),
+        )?),
+    };
     let agent = Agent::start(bench_config(1, Duration::from_millis(300)), transport, Arc::new(SystemClock))?;
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the pinging agent did not start");
@@ -316,14 +353,14 @@ fn through_agents(
     let ping = agent.insert_node(NewNode::new("object", PING))?;
     let pong = agent.insert_node(NewNode::new("object", PONG))?;
     let signals = agent.subscribe(100_000);
-    let args = helper::echo_args(
-        config.domain_id,
-        &prefix,
-        false,
-        config.multicast,
-        updates,
-        security.map(|c| c.helper.as_path()),
-    );
+    let security = match via {
+        Via::Secured(credentials) => Some(credentials.helper.as_path()),
+        Via::Rtps | Via::Shm => None,
+    };
+    let mut args = helper::echo_args(config.domain_id, &prefix, false, config.multicast, updates, security);
+    if matches!(via, Via::Shm) {
+        args.push("--shm".into());
+    }
     let _helper = Helper::spawn(program, &args)?;
     // The echo agent joins, then echoes; wait for the echo of a probe.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -371,6 +408,13 @@ fn through_agents(
     Ok(figures)
 }
 
+/// The shared-memory transport of the agent ping-pong's side `side` (1 pings, 2 echoes), on services of `prefix`.
+fn shm_transport(prefix: &str, side: u128) -> anyhow::Result<ShmTransport> {
+    let endpoint = EndpointId((u128::from(std::process::id()) << 8) | side);
+    ShmTransport::open(&format!("cortex/bench/{prefix}"), endpoint, &ShmSettings::default())
+        .context("opening shared memory")
+}
+
 fn is_pong(change: &Change, pong: NodeId) -> bool {
     matches!(change, Change::AttrUpdated { element: Element::Node(id), name } if *id == pong && name.as_str() == "cam_rgb")
 }
@@ -380,7 +424,8 @@ fn is_pong(change: &Change, pong: NodeId) -> bool {
 ///
 /// # Errors
 /// The transport or agent cannot start, or the agent gets no graph with ping and pong nodes within 30 s.
-/// With `security`, it joins with DDS Security's credentials in that directory.
+/// With `security`, it joins with DDS Security's credentials in that directory; with `shm`, over same-host shared
+/// memory instead of RTPS.
 pub fn echo(
     domain: u16,
     prefix: &str,
@@ -388,8 +433,13 @@ pub fn echo(
     multicast: Multicast,
     updates: UpdateDelivery,
     security: Option<&Path>,
+    shm: bool,
 ) -> anyhow::Result<()> {
-    let transport = rtps_secured(domain, prefix, multicast, updates, security)?;
+    let transport: Arc<dyn Transport> = if shm {
+        Arc::new(shm_transport(prefix, 2)?)
+    } else {
+        Arc::new(rtps_secured(domain, prefix, multicast, updates, security)?)
+    };
     if raw {
         while let Some(sample) = transport.recv_timeout(Duration::from_secs(60)) {
             transport.publish(sample.channel, sample.bytes)?;

@@ -1,0 +1,75 @@
+//! Agents over shared memory (`transport::shm::ShmTransport`, issue 20): real iceoryx2 services in this process,
+//! the agents pumped by hand on one manual clock, so every round is deterministic (shared-memory delivery is done
+//! when `publish` returns). The claims are about convergence and the counters, never about speed.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use agent::{Agent, AgentConfig, AgentId, GraphId};
+use dsr::NewNode;
+use transport::shm::{ShmSettings, ShmTransport};
+use transport::{Clock, EndpointId, ManualClock};
+
+type ShmAgent = Agent<ShmTransport>;
+
+fn agent(prefix: &str, id: u32, nonce: u64, clock: &ManualClock) -> ShmAgent {
+    let settings = ShmSettings { max_sample_bytes: 1 << 20, ..ShmSettings::default() };
+    let transport = ShmTransport::open(prefix, EndpointId(u128::from(nonce)), &settings).expect("shared memory");
+    // One named graph: two agents that start alone at once would otherwise create two graphs.
+    let config = AgentConfig { nonce: Some(nonce), graph: GraphId::new(0x5a), ..AgentConfig::new(AgentId(id)) };
+    Agent::new(config, transport, Arc::new(clock.clone()) as Arc<dyn Clock>).expect("agent")
+}
+
+/// Rounds of 50 ms until `done` holds; panics with `what` after 400 rounds (20 s of manual time).
+fn rounds_until(clock: &ManualClock, agents: &[&ShmAgent], what: &str, done: impl Fn() -> bool) {
+    for _ in 0..400 {
+        clock.advance(Duration::from_millis(50).as_nanos() as u64);
+        for a in agents {
+            a.pump();
+        }
+        if done() {
+            return;
+        }
+    }
+    panic!("not within 400 rounds: {what}");
+}
+
+fn same_graph(a: &ShmAgent, b: &ShmAgent) -> bool {
+    a.is_ready() && b.is_ready() && a.digest().is_some() && a.digest() == b.digest()
+}
+
+#[test]
+fn two_agents_over_shared_memory_converge_and_the_samples_went_through_it() {
+    let prefix = format!("cortex/test/{}/agents-converge", std::process::id());
+    let clock = ManualClock::new(1_000_000_000);
+    let a = agent(&prefix, 1, 101, &clock);
+    let b = agent(&prefix, 2, 102, &clock);
+    rounds_until(&clock, &[&a, &b], "both ready", || a.is_ready() && b.is_ready());
+    a.insert_node(NewNode::new("object", "cup").with_attr("pos_x", 1.0f32)).expect("write");
+    b.insert_node(NewNode::new("object", "plate").with_attr("pos_x", 2.0f32)).expect("write");
+    rounds_until(&clock, &[&a, &b], "equal graphs", || same_graph(&a, &b));
+    assert!(b.status().transport.samples_received > 0, "b received through shared memory");
+    assert!(a.status().transport.samples_received > 0, "a received through shared memory");
+}
+
+#[test]
+fn a_late_joiner_and_a_restarted_agent_get_the_graph_over_shared_memory() {
+    let prefix = format!("cortex/test/{}/agents-late", std::process::id());
+    let clock = ManualClock::new(1_000_000_000);
+    let a = agent(&prefix, 1, 201, &clock);
+    rounds_until(&clock, &[&a], "a ready alone", || a.is_ready());
+    for i in 0..20 {
+        a.insert_node(NewNode::new("object", &format!("o{i}")).with_attr("pos_x", i as f32)).expect("write");
+    }
+    let late = agent(&prefix, 2, 202, &clock);
+    rounds_until(&clock, &[&a, &late], "the late joiner has a's graph", || same_graph(&a, &late));
+    assert_eq!(late.status().nodes, a.status().nodes);
+
+    // The joiner dies (its ports go with it) and comes back as a new life, while a writes on.
+    drop(late);
+    a.insert_node(NewNode::new("object", "while-away")).expect("write");
+    let back = agent(&prefix, 2, 203, &clock);
+    rounds_until(&clock, &[&a, &back], "the new life has a's graph", || same_graph(&a, &back));
+    back.insert_node(NewNode::new("object", "after-restart")).expect("write");
+    rounds_until(&clock, &[&a, &back], "a has the new life's write", || same_graph(&a, &back));
+}

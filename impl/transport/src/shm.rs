@@ -1,0 +1,258 @@
+//! Shared memory between agents on one host (issue 20): one iceoryx2 publish-subscribe service per channel and
+//! graph, which the same-host agents open by name.
+//!
+//! This module is the same-host path: [`ShmLane`] moves one channel's samples between the endpoints of one host
+//! through shared memory, and [`ShmTransport`] makes the three channels a [`crate::Transport`] (used by
+//! `cortex agent --transport shm`). The hybrid with RTPS (discovery, other hosts) is not written yet;
+//! `ARCHITECTURE.md` (section "Same-host shared memory") gives the design it follows.
+//!
+//! Shape of a lane sample: the sample's bytes as the transport was given them, as an iceoryx2 `[u8]` payload, with
+//! the sender's [`EndpointId`] in the sample's user header (`[u64; 2]`). iceoryx2 records the payload and header
+//! types in the service's static configuration, so a segment of another shape under the same name is refused when
+//! the lane opens ([`ShmError::Open`]), never read; the bytes themselves are checked by the agent's decoder, as
+//! samples from RTPS are.
+//!
+//! Copies: the sender writes the sample once, into the loaned shared-memory chunk (the publisher's loan is sized
+//! for `max_sample_bytes`; a larger sample is not sent and [`ShmPublish::TooLarge`] tells the caller to use RTPS).
+//! Each receiver copies the sample once out of shared memory into its own `Bytes`, so the chunk goes back to the
+//! publisher at once and a value the graph keeps never pins shared memory.
+
+use bytes::Bytes;
+use iceoryx2::prelude::*;
+use iceoryx2::service::ipc_threadsafe;
+
+use crate::EndpointId;
+
+mod transport;
+pub use transport::ShmTransport;
+
+/// The user header of every lane sample: the sender's [`EndpointId`] as two little-endian halves (low, high).
+type EndpointHeader = [u64; 2];
+
+fn endpoint_header(id: EndpointId) -> EndpointHeader {
+    [id.0 as u64, (id.0 >> 64) as u64]
+}
+
+fn endpoint_from_header(header: EndpointHeader) -> EndpointId {
+    EndpointId(u128::from(header[0]) | (u128::from(header[1]) << 64))
+}
+
+/// Errors of the shared-memory lane.
+#[derive(Debug, thiserror::Error)]
+pub enum ShmError {
+    /// The service name is not one iceoryx2 accepts.
+    #[error("shared memory: service name {name:?} is invalid: {reason}")]
+    Name {
+        /// The name that was refused.
+        name: String,
+        /// iceoryx2's reason.
+        reason: String,
+    },
+    /// iceoryx2 could not create or open a node, service or port (no usable shared memory, a segment of another
+    /// shape under the same name, too many ports).
+    #[error("shared memory: cannot open {what} of service {service:?}: {reason}")]
+    Open {
+        /// Which part failed (node, service, publisher, subscriber).
+        what: &'static str,
+        /// The service name.
+        service: String,
+        /// iceoryx2's reason.
+        reason: String,
+    },
+    /// A loan, send or receive failed.
+    #[error("shared memory: {op} on service {service:?} failed: {reason}")]
+    Io {
+        /// The operation (loan, send, receive).
+        op: &'static str,
+        /// The service name.
+        service: String,
+        /// iceoryx2's reason.
+        reason: String,
+    },
+}
+
+/// Settings of a lane.
+#[derive(Debug, Clone)]
+pub struct ShmSettings {
+    /// The largest sample (without the lane header) the lane carries; larger ones go by RTPS.
+    pub max_sample_bytes: usize,
+    /// How many endpoints of one host may open the lane.
+    pub max_endpoints: usize,
+    /// Samples a subscriber queues before the oldest is overwritten (the anti-entropy repairs what is lost).
+    pub buffer_samples: usize,
+}
+
+impl Default for ShmSettings {
+    fn default() -> Self {
+        Self { max_sample_bytes: 8 * 1024 * 1024, max_endpoints: 16, buffer_samples: 16 }
+    }
+}
+
+/// What [`ShmLane::publish`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShmPublish {
+    /// The sample went into shared memory for this many subscribers (the publisher's own included).
+    Sent {
+        /// Subscribers the sample was delivered to.
+        subscribers: usize,
+    },
+    /// The sample is larger than the lane's `max_sample_bytes`; nothing was sent.
+    TooLarge,
+}
+
+/// One sample received through shared memory.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ShmSample {
+    /// The endpoint that published it.
+    pub origin: EndpointId,
+    /// Its bytes, copied once out of shared memory.
+    pub bytes: Bytes,
+}
+
+/// One channel's shared-memory lane on this host: a publisher and a subscriber of one iceoryx2 service.
+pub struct ShmLane {
+    service: String,
+    origin: EndpointId,
+    max_sample_bytes: usize,
+    publisher: iceoryx2::port::publisher::Publisher<ipc_threadsafe::Service, [u8], EndpointHeader>,
+    subscriber: iceoryx2::port::subscriber::Subscriber<ipc_threadsafe::Service, [u8], EndpointHeader>,
+    _node: Node<ipc_threadsafe::Service>,
+}
+
+impl std::fmt::Debug for ShmLane {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ShmLane").field("service", &self.service).field("origin", &self.origin).finish()
+    }
+}
+
+impl ShmLane {
+    /// Opens (or creates) the lane named `service` for the endpoint `origin`.
+    ///
+    /// # Errors
+    /// [`ShmError::Name`] for a name iceoryx2 refuses, [`ShmError::Open`] when shared memory is unusable or the
+    /// service exists with another shape (then the caller keeps RTPS).
+    pub fn open(service: &str, origin: EndpointId, settings: &ShmSettings) -> Result<Self, ShmError> {
+        iceoryx2::prelude::set_log_level(LogLevel::Error);
+        let open = |what: &'static str, reason: String| ShmError::Open { what, service: service.to_owned(), reason };
+        let name: ServiceName =
+            service.try_into().map_err(|e| ShmError::Name { name: service.to_owned(), reason: format!("{e:?}") })?;
+        let node =
+            NodeBuilder::new().create::<ipc_threadsafe::Service>().map_err(|e| open("node", format!("{e:?}")))?;
+        let factory = node
+            .service_builder(&name)
+            .publish_subscribe::<[u8]>()
+            .user_header::<EndpointHeader>()
+            .max_publishers(settings.max_endpoints)
+            .max_subscribers(settings.max_endpoints)
+            .max_nodes(settings.max_endpoints)
+            .subscriber_max_buffer_size(settings.buffer_samples)
+            .history_size(0)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|e| open("service", format!("{e:?}")))?;
+        let publisher = factory
+            .publisher_builder()
+            .initial_max_slice_len(settings.max_sample_bytes)
+            .create()
+            .map_err(|e| open("publisher", format!("{e:?}")))?;
+        let subscriber = factory.subscriber_builder().create().map_err(|e| open("subscriber", format!("{e:?}")))?;
+        Ok(Self {
+            service: service.to_owned(),
+            origin,
+            max_sample_bytes: settings.max_sample_bytes,
+            publisher,
+            subscriber,
+            _node: node,
+        })
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// Publishes `bytes` to every subscriber of the lane on this host, written once into shared memory.
+    ///
+    /// # Errors
+    /// [`ShmError::Io`] when the loan or the send fails.
+    pub fn publish(&self, bytes: &[u8]) -> Result<ShmPublish, ShmError> {
+        if bytes.len() > self.max_sample_bytes {
+            return Ok(ShmPublish::TooLarge);
+        }
+        let io = |op: &'static str, reason: String| ShmError::Io { op, service: self.service.clone(), reason };
+        let mut sample = self.publisher.loan_slice_uninit(bytes.len()).map_err(|e| io("loan", format!("{e:?}")))?;
+        *sample.user_header_mut() = endpoint_header(self.origin);
+        let sample = sample.write_from_slice(bytes);
+        let subscribers = sample.send().map_err(|e| io("send", format!("{e:?}")))?;
+        Ok(ShmPublish::Sent { subscribers })
+    }
+
+    /// The next sample another endpoint published, if one is waiting (the lane's own samples are skipped).
+    ///
+    /// # Errors
+    /// [`ShmError::Io`] when receiving fails.
+    pub fn try_recv(&self) -> Result<Option<ShmSample>, ShmError> {
+        loop {
+            let Some(sample) = self.subscriber.receive().map_err(|e| ShmError::Io {
+                op: "receive",
+                service: self.service.clone(),
+                reason: format!("{e:?}"),
+            })?
+            else {
+                return Ok(None);
+            };
+            let origin = endpoint_from_header(*sample.user_header());
+            if origin == self.origin {
+                continue;
+            }
+            return Ok(Some(ShmSample { origin, bytes: Bytes::copy_from_slice(sample.payload()) }));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unique(name: &str) -> String {
+        format!("cortex/test/{}/{name}", std::process::id())
+    }
+
+    #[test]
+    fn a_sample_published_on_a_lane_reaches_the_other_endpoint_intact_and_not_its_sender() {
+        let service = unique("intact");
+        let settings = ShmSettings { max_sample_bytes: 1 << 20, ..ShmSettings::default() };
+        let a = ShmLane::open(&service, EndpointId(1), &settings).expect("lane a");
+        let b = ShmLane::open(&service, EndpointId(2), &settings).expect("lane b");
+        let frame: Vec<u8> = (0..(1 << 20)).map(|i| (i % 251) as u8).collect();
+        assert_eq!(a.publish(&frame).expect("publish"), ShmPublish::Sent { subscribers: 2 });
+        let got = b.try_recv().expect("receive").expect("a sample");
+        assert_eq!(got.origin, EndpointId(1));
+        assert_eq!(got.bytes.as_ref(), frame.as_slice());
+        assert_eq!(a.try_recv().expect("receive"), None, "a lane skips its own samples");
+        assert_eq!(b.try_recv().expect("receive"), None);
+    }
+
+    #[test]
+    fn a_sample_above_the_lane_size_is_not_sent_and_says_so() {
+        let service = unique("too-large");
+        let settings = ShmSettings { max_sample_bytes: 1024, ..ShmSettings::default() };
+        let a = ShmLane::open(&service, EndpointId(1), &settings).expect("lane a");
+        let b = ShmLane::open(&service, EndpointId(2), &settings).expect("lane b");
+        assert_eq!(a.publish(&[7u8; 1025]).expect("publish"), ShmPublish::TooLarge);
+        assert_eq!(b.try_recv().expect("receive"), None);
+    }
+
+    #[test]
+    fn a_service_of_another_shape_under_the_lane_name_is_refused_with_an_error_not_a_panic() {
+        let service = unique("other-shape");
+        // Someone else's service under the lane's name: bytes without the lane's endpoint header.
+        let node = NodeBuilder::new().create::<ipc_threadsafe::Service>().expect("node");
+        let name: ServiceName = service.as_str().try_into().expect("name");
+        let _other = node.service_builder(&name).publish_subscribe::<[u8]>().create().expect("service");
+        match ShmLane::open(&service, EndpointId(2), &ShmSettings::default()) {
+            Err(ShmError::Open { what: "service", .. }) => {}
+            other => panic!("expected the lane to refuse the service, got {other:?}"),
+        }
+    }
+}

@@ -1,0 +1,185 @@
+//! [`ShmTransport`]: a [`Transport`] whose endpoints are all on one host, every channel an [`ShmLane`], and
+//! receivers woken by an iceoryx2 event service rather than polling (the spike showed polling costs milliseconds
+//! with 8 receivers on 2 cores). It has no discovery and no other-host path: it is the same-host half of the
+//! hybrid transport the design describes (`ARCHITECTURE.md`, "Same-host shared memory"), usable alone by agents
+//! that are known to share a host.
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use bytes::Bytes;
+use iceoryx2::prelude::*;
+use iceoryx2::service::ipc_threadsafe;
+
+use super::{ShmError, ShmLane, ShmPublish, ShmSettings};
+use crate::{Channel, Counters, EndpointId, Sample, Transport, TransportError, TransportStats};
+
+/// A transport over shared memory between the endpoints of one host (see the module documentation).
+pub struct ShmTransport {
+    id: EndpointId,
+    lanes: [ShmLane; 3],
+    notifier: iceoryx2::port::notifier::Notifier<ipc_threadsafe::Service>,
+    listener: Mutex<iceoryx2::port::listener::Listener<ipc_threadsafe::Service>>,
+    /// The lane `try_recv` looks at first, so no channel starves the others.
+    next_lane: AtomicUsize,
+    counters: Counters,
+    max_sample_bytes: usize,
+    _node: Node<ipc_threadsafe::Service>,
+}
+
+impl std::fmt::Debug for ShmTransport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ShmTransport").field("id", &self.id).field("lanes", &self.lanes).finish()
+    }
+}
+
+impl ShmTransport {
+    /// Opens the lanes `PREFIX/updates`, `PREFIX/sync`, `PREFIX/calls` and the wake-up event `PREFIX/wake` for the
+    /// endpoint `id`.
+    ///
+    /// # Errors
+    /// As [`ShmLane::open`]: shared memory unusable, a name refused, or a service of another shape.
+    pub fn open(prefix: &str, id: EndpointId, settings: &ShmSettings) -> Result<Self, ShmError> {
+        // iceoryx2's own log goes to standard error; keep it to errors (its "no config file" warning is expected).
+        iceoryx2::prelude::set_log_level(LogLevel::Error);
+        let service = format!("{prefix}/wake");
+        let open = |what: &'static str, reason: String| ShmError::Open { what, service: service.clone(), reason };
+        let name: ServiceName = service
+            .as_str()
+            .try_into()
+            .map_err(|e| ShmError::Name { name: service.clone(), reason: format!("{e:?}") })?;
+        let node =
+            NodeBuilder::new().create::<ipc_threadsafe::Service>().map_err(|e| open("node", format!("{e:?}")))?;
+        // A process killed without closing its ports leaves a dead node holding them (and their shared memory);
+        // reclaim those before opening, so restarts do not use up `max_endpoints`.
+        let cleaned = node.try_cleanup_dead_nodes();
+        if cleaned.cleanups + cleaned.failed_cleanups > 0 {
+            tracing::info!(cleaned = cleaned.cleanups, failed = cleaned.failed_cleanups, "dead iceoryx2 nodes");
+        }
+        let lane = |channel: Channel| ShmLane::open(&format!("{prefix}/{}", channel.name()), id, settings);
+        let lanes = [lane(Channel::Updates)?, lane(Channel::Sync)?, lane(Channel::Calls)?];
+        let events = node
+            .service_builder(&name)
+            .event()
+            .max_notifiers(settings.max_endpoints)
+            .max_listeners(settings.max_endpoints)
+            .max_nodes(settings.max_endpoints)
+            .open_or_create()
+            .map_err(|e| open("event service", format!("{e:?}")))?;
+        let notifier = events.notifier_builder().create().map_err(|e| open("notifier", format!("{e:?}")))?;
+        let listener = events.listener_builder().create().map_err(|e| open("listener", format!("{e:?}")))?;
+        Ok(Self {
+            id,
+            lanes,
+            notifier,
+            listener: Mutex::new(listener),
+            next_lane: AtomicUsize::new(0),
+            counters: Counters::default(),
+            max_sample_bytes: settings.max_sample_bytes,
+            _node: node,
+        })
+    }
+}
+
+impl Transport for ShmTransport {
+    fn local_id(&self) -> EndpointId {
+        self.id
+    }
+
+    fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
+        let lane = &self.lanes[channel.index()];
+        let write = |detail: String| TransportError::Write { channel: channel.name(), detail };
+        match lane.publish(&bytes).map_err(|e| write(e.to_string()))? {
+            ShmPublish::Sent { .. } => {}
+            ShmPublish::TooLarge => {
+                return Err(TransportError::TooLarge {
+                    channel: channel.name(),
+                    size: bytes.len(),
+                    limit: self.max_sample_bytes,
+                });
+            }
+        }
+        self.counters.sent(bytes.len(), bytes.len());
+        self.notifier.notify().map_err(|e| write(format!("wake-up notify: {e:?}")))?;
+        Ok(())
+    }
+
+    fn try_recv(&self) -> Option<Sample> {
+        let first = self.next_lane.fetch_add(1, Ordering::Relaxed);
+        for k in 0..self.lanes.len() {
+            let channel = Channel::ALL[(first + k) % self.lanes.len()];
+            match self.lanes[channel.index()].try_recv() {
+                Ok(Some(sample)) => {
+                    self.counters.received(sample.bytes.len());
+                    return Some(Sample { channel, origin: sample.origin, bytes: sample.bytes });
+                }
+                Ok(None) => {}
+                Err(error) => tracing::warn!(%error, "shared-memory receive failed"),
+            }
+        }
+        None
+    }
+
+    fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(sample) = self.try_recv() {
+                return Some(sample);
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            // A notification sent after the look above is kept by the listener, so the wait returns at once.
+            let listener = self.listener.lock().unwrap_or_else(|p| p.into_inner());
+            if let Err(error) = listener.timed_wait(|_| {}, left) {
+                tracing::warn!(?error, "shared-memory wake-up wait failed");
+                drop(listener);
+                std::thread::sleep(left.min(Duration::from_millis(1)));
+            }
+        }
+    }
+
+    fn stats(&self) -> TransportStats {
+        self.counters.snapshot()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn samples_on_every_channel_reach_the_other_endpoint_with_their_channel_and_origin() {
+        let prefix = format!("cortex/test/{}/transport", std::process::id());
+        let settings = ShmSettings { max_sample_bytes: 1 << 16, ..ShmSettings::default() };
+        let a = ShmTransport::open(&prefix, EndpointId(10), &settings).expect("a");
+        let b = ShmTransport::open(&prefix, EndpointId(11), &settings).expect("b");
+        for channel in Channel::ALL {
+            a.publish(channel, Bytes::from(vec![channel.index() as u8; 100])).expect("publish");
+        }
+        let mut got: Vec<Sample> = (0..3).filter_map(|_| b.recv_timeout(Duration::from_secs(5))).collect();
+        got.sort_by_key(|s| s.channel.index());
+        assert_eq!(got.len(), 3);
+        for (sample, channel) in got.iter().zip(Channel::ALL) {
+            assert_eq!(sample.channel, channel);
+            assert_eq!(sample.origin, EndpointId(10));
+            assert_eq!(sample.bytes.as_ref(), &[channel.index() as u8; 100][..]);
+        }
+        assert_eq!(a.try_recv(), None, "an endpoint never receives its own samples");
+        assert_eq!(b.stats().samples_received, 3);
+        assert_eq!(a.stats().samples_sent, 3);
+    }
+
+    #[test]
+    fn a_sample_above_the_lane_size_is_a_too_large_error() {
+        let prefix = format!("cortex/test/{}/too-large-transport", std::process::id());
+        let settings = ShmSettings { max_sample_bytes: 64, ..ShmSettings::default() };
+        let a = ShmTransport::open(&prefix, EndpointId(1), &settings).expect("a");
+        match a.publish(Channel::Updates, Bytes::from(vec![0u8; 65])) {
+            Err(TransportError::TooLarge { size: 65, limit: 64, .. }) => {}
+            other => panic!("expected TooLarge, got {other:?}"),
+        }
+    }
+}
