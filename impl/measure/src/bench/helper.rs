@@ -44,7 +44,8 @@ impl Drop for Helper {
 }
 
 /// `bench echo`: echoes pings, raw samples or through an agent.
-/// With `security`, the helper joins with DDS Security's credentials in that directory.
+/// With `security`, the helper joins with DDS Security's credentials in that directory; with `shm`, over same-host
+/// shared memory instead of RTPS.
 pub fn echo_args(
     domain: u16,
     prefix: &str,
@@ -52,6 +53,7 @@ pub fn echo_args(
     multicast: Multicast,
     updates: UpdateDelivery,
     security: Option<&Path>,
+    shm: bool,
 ) -> Vec<String> {
     let mut args = vec!["bench".into(), "echo".into(), "--domain".into(), domain.to_string(), "--prefix".into()];
     args.push(prefix.into());
@@ -60,6 +62,9 @@ pub fn echo_args(
     }
     args.extend(["--multicast".into(), multicast_name(multicast).into(), "--updates".into(), updates.name().into()]);
     args.extend(security_args(security));
+    if shm {
+        args.push("--shm".into());
+    }
     args
 }
 
@@ -93,8 +98,10 @@ mod tests {
 
     #[test]
     fn helper_command_lines_name_every_setting() {
-        let echo = echo_args(3, "p", true, Multicast::Off, UpdateDelivery::Reliable, None);
+        let echo = echo_args(3, "p", true, Multicast::Off, UpdateDelivery::Reliable, None, false);
         assert_eq!(echo.join(" "), "bench echo --domain 3 --prefix p --raw --multicast off --updates reliable");
+        let shm = echo_args(3, "p", false, Multicast::Off, UpdateDelivery::Reliable, None, true);
+        assert_eq!(shm.join(" "), "bench echo --domain 3 --prefix p --multicast off --updates reliable --shm");
         assert_eq!(join_child_args(1, "j", 10, None).join(" "), "bench join-child --domain 1 --prefix j --nodes 10");
         assert_eq!(
             join_child_args(1, "j", 10, Some(Path::new("/k/b"))).join(" "),

@@ -263,7 +263,7 @@ fn raw(
     let prefix = format!("rawrtt{}{}", std::process::id(), updates.name().replace('-', ""));
     let start = counting.counters()?;
     let transport = rtps(config.domain_id, &prefix, config.multicast, updates)?;
-    let args = helper::echo_args(config.domain_id, &prefix, true, config.multicast, updates, None);
+    let args = helper::echo_args(config.domain_id, &prefix, true, config.multicast, updates, None, false);
     let _helper = Helper::spawn(program, &args)?;
     // Discovery: probe until an echo comes back.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -357,10 +357,8 @@ fn through_agents(
         Via::Secured(credentials) => Some(credentials.helper.as_path()),
         Via::Rtps | Via::Shm => None,
     };
-    let mut args = helper::echo_args(config.domain_id, &prefix, false, config.multicast, updates, security);
-    if matches!(via, Via::Shm) {
-        args.push("--shm".into());
-    }
+    let shm = matches!(via, Via::Shm);
+    let args = helper::echo_args(config.domain_id, &prefix, false, config.multicast, updates, security, shm);
     let _helper = Helper::spawn(program, &args)?;
     // The echo agent joins, then echoes; wait for the echo of a probe.
     let deadline = Instant::now() + Duration::from_secs(30);
