@@ -7,23 +7,23 @@ mod common;
 
 use std::time::Duration;
 
-use common::{converge, join, pause, seed_nodes, seed_path, signal, spawn};
+use common::{converge, join, pause, seed_nodes, signal, spawn_seeded_with};
 
 const SHM: [&str; 2] = ["--transport", "shm"];
+
+/// Agent 5 over shared memory, seeded with the bundled graph and ready; with the graph's node count.
+fn seeded_agent(domain: u16, prefix: &str) -> (common::Agent, usize) {
+    let nodes = seed_nodes();
+    let mut seeded = spawn_seeded_with(domain, prefix, &SHM);
+    seeded.wait_ready_with(nodes);
+    (seeded, nodes)
+}
 
 #[test]
 fn agents_over_shared_memory_converge_after_a_late_join_a_kill_and_restart_and_a_pause() {
     let prefix = format!("shm_a{}", std::process::id());
     let domain = 95;
-    let nodes = seed_nodes();
-    let seed = seed_path();
-    let mut seeded = spawn(
-        5,
-        domain,
-        &prefix,
-        &[&SHM[..], &["--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"]].concat(),
-    );
-    seeded.wait_ready_with(nodes);
+    let (mut seeded, nodes) = seeded_agent(domain, &prefix);
 
     // A late joiner gets the graph (from shared memory: the only path these agents have) and writes.
     let mut joiner = join(7, domain, &prefix, &[&SHM[..], &["--insert-nodes", "3"]].concat(), nodes);
@@ -49,15 +49,7 @@ fn agents_over_shared_memory_converge_after_a_late_join_a_kill_and_restart_and_a
 fn agents_over_shared_memory_converge_through_injected_loss_and_duplication() {
     let prefix = format!("shm_b{}", std::process::id());
     let domain = 96;
-    let nodes = seed_nodes();
-    let seed = seed_path();
-    let mut seeded = spawn(
-        5,
-        domain,
-        &prefix,
-        &[&SHM[..], &["--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"]].concat(),
-    );
-    seeded.wait_ready_with(nodes);
+    let (mut seeded, nodes) = seeded_agent(domain, &prefix);
     let faults = ["--faults", "loss=0.3,duplicate=0.2"];
     let mut lossy = join(7, domain, &prefix, &[&SHM[..], &faults[..], &["--insert-nodes", "5"]].concat(), nodes);
     let mut writer = join(8, domain, &prefix, &[&SHM[..], &["--insert-nodes", "5"]].concat(), nodes);

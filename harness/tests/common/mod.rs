@@ -78,8 +78,14 @@ pub fn spawn(id: u32, domain: u16, prefix: &str, extra: &[&str]) -> Agent {
 
 /// The seeded agent every test pauses: `id` 5, starting from the seed graph at once.
 pub fn spawn_seeded(domain: u16, prefix: &str) -> Agent {
+    spawn_seeded_with(domain, prefix, &[])
+}
+
+/// [`spawn_seeded`] with more arguments (e.g. another transport).
+pub fn spawn_seeded_with(domain: u16, prefix: &str, extra: &[&str]) -> Agent {
     let seed = seed_path();
-    spawn(5, domain, prefix, &["--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"])
+    let args = [&["--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"][..], extra].concat();
+    spawn(5, domain, prefix, &args)
 }
 
 /// Sends `SIGname` to the process.
