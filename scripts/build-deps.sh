@@ -4,14 +4,8 @@
 # libssl-dev is needed); OpenSSL's configuration needs `perl` with its core modules (IPC::Cmd; Debian's perl-base
 # alone lacks them) and `make`. Installs whichever is missing (Debian packages; needs root). Safe to run again.
 set -euo pipefail
+source "$(dirname "$0")/apt-missing.sh"
 missing=()
 perl -MIPC::Cmd -MFile::Compare -e1 2>/dev/null || missing+=(perl)
 command -v make >/dev/null || missing+=(make)
-if [ ${#missing[@]} -eq 0 ]; then
-  exit 0
-fi
-if [ "$(id -u)" != 0 ]; then
-  echo "build-deps: ${missing[*]} missing and not root: install them (the OpenSSL build needs them)" >&2
-  exit 1
-fi
-(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}") >/dev/null
+install_missing build-deps "install them (the OpenSSL build needs them)" "${missing[@]}"
