@@ -35,6 +35,7 @@ use perception::roles::Role;
 use perception::sensors::{CameraReader, Image, LaserReader, write_image};
 use transport::fault::FaultConfig;
 use transport::rtps::{RtpsConfig, UpdateDelivery};
+use transport::shm::ShmSettings;
 
 /// Arguments of `cortex agent`.
 #[derive(Debug, Args)]
@@ -113,10 +114,11 @@ pub struct AgentArgs {
     /// one graph may mix settings: each reads both.
     #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
     pub updates: UpdatesArg,
-    /// What carries the samples: `rtps` (DDS over UDP, any host), or `shm` (iceoryx2 shared memory, every agent of
-    /// the graph on this host and started with `--transport shm`; services `cortex/d<DOMAIN>/<PREFIX>/...`). The
-    /// hybrid (shared memory to same-host peers, RTPS to the others) is not written yet.
-    #[arg(long, value_enum, default_value_t = TransportArg::Rtps)]
+    /// What carries the samples: `auto` (RTPS, and same-host shared memory to the agents of this graph on this
+    /// host and network namespace: `transport::hybrid`), `rtps` (DDS over UDP alone), or `shm` (shared memory
+    /// alone: every agent of the graph on this host and started with `--transport shm`; no discovery). With
+    /// `--security`, `auto` is RTPS alone: shared memory would bypass the protection.
+    #[arg(long, value_enum, default_value_t = TransportArg::Auto)]
     pub transport: TransportArg,
     /// Where this agent records each life's incarnation (`DIR/d<DOMAIN>-<PREFIX>-a<ID>.life`), so that a restarted
     /// agent never takes an earlier life's replica id, even when no peer is reachable. Default
@@ -144,7 +146,9 @@ pub fn life_file(state_dir: Option<&str>, domain: u16, prefix: &str, id: u32) ->
 /// `--transport`: what carries an agent's samples.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum TransportArg {
-    /// RTPS (DDS over UDP), the default.
+    /// RTPS, with same-host shared memory beside it (`transport::hybrid::HybridTransport`), the default.
+    Auto,
+    /// RTPS (DDS over UDP) alone.
     Rtps,
     /// Shared memory between the agents of one host (`transport::shm::ShmTransport`), no RTPS.
     Shm,
@@ -262,32 +266,7 @@ pub fn security_files(dir: Option<&std::path::Path>) -> Result<Option<transport:
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
     let life = life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id);
-    let agent = if args.transport == TransportArg::Shm {
-        if args.security.is_some() {
-            bail!("--security protects RTPS; it does not apply to --transport shm");
-        }
-        let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
-        let prefix = format!("cortex/d{}/{}", args.domain, args.topic_prefix);
-        agent::shm::start(config, &prefix, &transport::shm::ShmSettings::default(), args.faults)
-            .context("opening shared memory")?
-    } else {
-        let security = security_files(args.security.as_deref())?;
-        start_rtps_agent(
-            args.id,
-            args.graph_id,
-            args.join_wait_ms,
-            args.seed_json.as_deref(),
-            RtpsConfig {
-                domain_id: args.domain,
-                topic_prefix: args.topic_prefix.clone(),
-                updates: args.updates.into(),
-                security,
-                ..RtpsConfig::default()
-            },
-            args.faults,
-            life,
-        )?
-    };
+    let agent = start_agent(&args, life)?;
     let stop = Arc::new(AtomicBool::new(false));
     let work = start_work(&args, &agent, &stop)?;
     {
@@ -309,6 +288,35 @@ pub fn run(args: AgentArgs) -> Result<()> {
         dump_graph(&agent, path)?;
     }
     Ok(())
+}
+
+/// Starts the agent of `cortex agent` on the transport `--transport` asks for.
+fn start_agent(args: &AgentArgs, life: Option<PathBuf>) -> Result<Arc<Agent<AgentTransport>>> {
+    let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
+    if args.transport == TransportArg::Shm {
+        if args.security.is_some() {
+            bail!("--security protects RTPS; it does not apply to --transport shm");
+        }
+        let prefix = format!("cortex/d{}/{}", args.domain, args.topic_prefix);
+        return agent::shm::start(config, &prefix, &ShmSettings::default(), args.faults)
+            .context("opening shared memory");
+    }
+    let security = security_files(args.security.as_deref())?;
+    let lanes = args.transport == TransportArg::Auto && security.is_none();
+    let rtps = RtpsConfig {
+        domain_id: args.domain,
+        topic_prefix: args.topic_prefix.clone(),
+        updates: args.updates.into(),
+        security,
+        ..RtpsConfig::default()
+    };
+    let faults = args.faults;
+    let agent = if lanes {
+        agent::rtps::start_hybrid(config, rtps, &ShmSettings::default(), faults)
+    } else {
+        agent::rtps::start(config, rtps, faults)
+    };
+    agent.context("joining the DDS domain")
 }
 
 /// Writes the agent's graph as CORTEX JSON to `path` (`--dump-json`).

@@ -408,6 +408,9 @@ impl<T: Transport + 'static> Agent<T> {
             wire_bytes_sent: status.transport.wire_bytes_sent,
             participant_failures: status.transport.participant_failures,
             participant_rebuilds: status.transport.participant_rebuilds,
+            shm_samples_sent: status.transport.shm_samples_sent,
+            shm_samples_received: status.transport.shm_samples_received,
+            same_host_peers: status.transport.same_host_peers,
         }
     }
 

@@ -147,6 +147,15 @@ pub struct StatusLine {
     pub participant_failures: u64,
     /// Times the DDS participants were rebuilt after a failure.
     pub participant_rebuilds: u64,
+    /// Of the samples published, those that went through same-host shared memory.
+    #[serde(default)]
+    pub shm_samples_sent: u64,
+    /// Of the samples received, those that came through same-host shared memory.
+    #[serde(default)]
+    pub shm_samples_received: u64,
+    /// Same-host peers reachable through shared memory now.
+    #[serde(default)]
+    pub same_host_peers: u64,
 }
 
 /// A command to an agent process, one line on its standard input (`cortex agent --control-stdin`): the other

@@ -8,6 +8,8 @@
 //!   keep-all, explicit resource limits on every reader and writer, readers in a participant apart from the writers',
 //!   a bounded inbox, pacing of large samples.
 //! - [`inproc::Bus`] / [`inproc::InProcTransport`]: an in-process bus for tests and deterministic simulation.
+//! - [`hybrid::HybridTransport`]: RTPS for discovery and other hosts, same-host shared memory ([`shm`]) for
+//!   samples between the agents of one host (the default of `cortex agent`).
 //! - [`fault::FaultInjector`]: seeded loss, duplication, reordering, delay and partitions, wrapped around either.
 //!
 //! **Every queue is bounded**: a full inbox drops (in process) or pushes back on the network reader (RTPS), and
@@ -23,6 +25,7 @@ use std::time::Duration;
 use bytes::Bytes;
 
 pub mod fault;
+pub mod hybrid;
 pub mod inproc;
 pub mod rng;
 pub mod rtps;
@@ -231,6 +234,18 @@ pub struct TransportStats {
     /// than failures: a rebuild is under way (or failing, which the log says).
     #[serde(default)]
     pub participant_rebuilds: u64,
+    /// Of the samples published, those that went through same-host shared memory ([`hybrid`], [`shm`]).
+    #[serde(default)]
+    pub shm_samples_sent: u64,
+    /// Of the samples received, those that came through same-host shared memory.
+    #[serde(default)]
+    pub shm_samples_received: u64,
+    /// RTPS copies of samples a same-host peer also sent through shared memory, dropped on arrival ([`hybrid`]).
+    #[serde(default)]
+    pub same_host_duplicates: u64,
+    /// Same-host peers reachable through shared memory now ([`hybrid`]; a gauge, not a counter).
+    #[serde(default)]
+    pub same_host_peers: u64,
 }
 
 /// Atomic counters behind [`TransportStats`].
@@ -299,6 +314,7 @@ impl Counters {
             duplicated_injected: 0,
             participant_failures: self.participant_failures.load(Ordering::Relaxed),
             participant_rebuilds: self.participant_rebuilds.load(Ordering::Relaxed),
+            ..TransportStats::default()
         }
     }
 }

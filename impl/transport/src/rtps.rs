@@ -246,6 +246,19 @@ impl RtpsTransport {
     pub fn discovery(&self) -> DiscoveryTimes {
         *self.discovery.times.lock().unwrap_or_else(|p| p.into_inner())
     }
+
+    /// The GUID prefix of the participant holding this transport's readers (its publishing participant's, when the
+    /// readers share it). Changes with a rebuild of the participants, as [`Transport::local_id`] does.
+    pub fn reading_prefix(&self) -> [u8; 12] {
+        self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()).1
+    }
+
+    /// The GUID prefixes of the remote readers `channel`'s writers have matched now (the best-effort updates
+    /// writer's among [`Channel::Updates`]'), as discovery reported them; at most a few thousand are remembered.
+    pub fn matched_reader_prefixes(&self, channel: Channel) -> Vec<[u8; 12]> {
+        let readers = self.discovery.readers.lock().unwrap_or_else(|p| p.into_inner());
+        readers[channel.index()].iter().map(|guid| discovery::prefix_of(*guid)).collect()
+    }
 }
 
 impl Drop for RtpsTransport {

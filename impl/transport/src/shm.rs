@@ -26,6 +26,13 @@ use crate::EndpointId;
 mod transport;
 pub use transport::ShmTransport;
 
+/// An endpoint id no other life of any process shares, for a lane of this process: the process id in the top 32
+/// bits beside the start time in nanoseconds (RTPS endpoint ids, 12-byte GUID prefixes, leave the top 32 bits zero).
+pub fn unique_endpoint() -> EndpointId {
+    let now_ns = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    EndpointId((u128::from(std::process::id()) << 96) | (now_ns & ((1 << 96) - 1)) | 1 << 127)
+}
+
 /// The user header of every lane sample: the sender's [`EndpointId`] as two little-endian halves (low, high).
 type EndpointHeader = [u64; 2];
 

@@ -142,7 +142,8 @@ impl Transport for ShmTransport {
     }
 
     fn stats(&self) -> TransportStats {
-        self.counters.snapshot()
+        let stats = self.counters.snapshot();
+        TransportStats { shm_samples_sent: stats.samples_sent, shm_samples_received: stats.samples_received, ..stats }
     }
 }
 
