@@ -50,7 +50,22 @@ pub fn state_dir(prefix: &str) -> PathBuf {
 
 /// Starts agent `id` on `domain` with the topic prefix `prefix`, printing its status every 100 ms.
 pub fn spawn(id: u32, domain: u16, prefix: &str, extra: &[&str]) -> Agent {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cortex"))
+    spawn_in(None, id, domain, prefix, extra)
+}
+
+/// [`spawn`] inside the network namespace `namespace` (`ip netns exec`, which becomes the agent process itself, so
+/// signals reach the agent), or in this process's namespace for `None`.
+pub fn spawn_in(namespace: Option<&str>, id: u32, domain: u16, prefix: &str, extra: &[&str]) -> Agent {
+    let cortex = env!("CARGO_BIN_EXE_cortex");
+    let mut command = match namespace {
+        Some(namespace) => {
+            let mut command = Command::new("ip");
+            command.args(["netns", "exec", namespace, cortex]);
+            command
+        }
+        None => Command::new(cortex),
+    };
+    let mut child = command
         .args(["agent", "--id", &id.to_string(), "--domain", &domain.to_string(), "--topic-prefix", prefix])
         .args(["--json-status", "--status-ms", "100", "--state-dir"])
         .arg(state_dir(prefix))

@@ -1,0 +1,140 @@
+//! `cortex agent` processes on the default transport, RTPS with same-host shared memory (`transport::hybrid`,
+//! issue 20): agents of one host find each other on the lanes and move their samples through them, through a late
+//! join, a kill and restart, and a pause; an agent in another network namespace is another host, reached by RTPS
+//! alone, while the pair beside it keeps its lanes. Claims on status lines (nodes, digests, same-host peers,
+//! samples through shared memory), never on speed.
+//!
+//! The second test needs root and `ip` (CI runs `scripts/test.sh` as root) to make two network namespaces joined by
+//! a veth pair; without them it prints why and skips.
+
+mod common;
+
+use std::process::Command;
+use std::time::Duration;
+
+use common::{Agent, converge, join, pause, seed_nodes, seed_path, signal, spawn_in, spawn_seeded};
+
+/// Waits until `agent` knows `peers` same-host peers and has taken samples from the lanes.
+fn wait_on_lanes(agent: &mut Agent, peers: u64) {
+    agent.wait_for(
+        &format!("{peers} same-host peer(s) and samples through shared memory"),
+        Duration::from_secs(30),
+        |s| s.same_host_peers == peers && s.shm_samples_received > 0,
+        |_| false,
+    );
+}
+
+#[test]
+fn same_host_agents_move_their_samples_through_shared_memory_through_a_join_a_kill_and_a_pause() {
+    let prefix = format!("hybrid_a{}", std::process::id());
+    let domain = 97;
+    let nodes = seed_nodes();
+    let mut seeded = spawn_seeded(domain, &prefix);
+    seeded.wait_ready_with(nodes);
+
+    let mut joiner = join(7, domain, &prefix, &["--insert-nodes", "3"], nodes);
+    converge(&mut [&mut seeded, &mut joiner], nodes + 3);
+    wait_on_lanes(&mut seeded, 1);
+    wait_on_lanes(&mut joiner, 1);
+
+    // Killed without closing its ports; its new life finds the lanes again (the dead life's ports reclaimed).
+    signal(&joiner.child, "KILL");
+    let _ = joiner.child.wait();
+    let mut again = join(7, domain, &prefix, &[], nodes + 3);
+    converge(&mut [&mut seeded, &mut again], nodes + 3);
+    wait_on_lanes(&mut again, 1);
+
+    // Paused long enough to be forgotten as a same-host peer (3 s), then back; a new writer's nodes reach it.
+    pause(&seeded, Duration::from_secs(4));
+    let mut writer = join(8, domain, &prefix, &["--insert-nodes", "2"], nodes + 3);
+    converge(&mut [&mut seeded, &mut again, &mut writer], nodes + 5);
+    wait_on_lanes(&mut writer, 2);
+    wait_on_lanes(&mut seeded, 2);
+}
+
+/// Two network namespaces joined by a veth pair, deleted when dropped.
+struct Namespaces {
+    names: [String; 2],
+}
+
+impl Namespaces {
+    fn create() -> Result<Self, String> {
+        let tag = std::process::id();
+        let names = [format!("cxhy{tag}a"), format!("cxhy{tag}b")];
+        let made = Namespaces { names: names.clone() };
+        let [a, b] = [names[0].as_str(), names[1].as_str()];
+        let (va, vb) = (format!("vh{tag}a"), format!("vh{tag}b"));
+        let steps: Vec<Vec<&str>> = vec![
+            vec!["netns", "add", a],
+            vec!["netns", "add", b],
+            vec!["link", "add", &va, "netns", a, "type", "veth", "peer", "name", &vb, "netns", b],
+            vec!["-n", a, "addr", "add", "10.78.0.1/24", "dev", &va],
+            vec!["-n", b, "addr", "add", "10.78.0.2/24", "dev", &vb],
+            vec!["-n", a, "link", "set", &va, "up"],
+            vec!["-n", b, "link", "set", &vb, "up"],
+            vec!["-n", a, "link", "set", "lo", "up"],
+            vec!["-n", b, "link", "set", "lo", "up"],
+            vec!["-n", a, "route", "add", "224.0.0.0/4", "dev", &va],
+            vec!["-n", b, "route", "add", "224.0.0.0/4", "dev", &vb],
+        ];
+        for step in steps {
+            let output = Command::new("ip").args(&step).output().map_err(|e| format!("ip {step:?}: {e}"))?;
+            if !output.status.success() {
+                return Err(format!("ip {step:?}: {}", String::from_utf8_lossy(&output.stderr).trim()));
+            }
+        }
+        Ok(made)
+    }
+}
+
+impl Drop for Namespaces {
+    fn drop(&mut self) {
+        for name in &self.names {
+            let _ = Command::new("ip").args(["netns", "del", name]).output();
+        }
+    }
+}
+
+#[test]
+fn an_agent_in_another_network_namespace_is_reached_by_rtps_while_a_same_host_pair_keeps_its_lanes() {
+    let namespaces = match Namespaces::create() {
+        Ok(namespaces) => namespaces,
+        Err(error) => {
+            eprintln!("skipped: cannot create two network namespaces (needs root and iproute2): {error}");
+            return;
+        }
+    };
+    let [a, b] = [Some(namespaces.names[0].as_str()), Some(namespaces.names[1].as_str())];
+    let prefix = format!("hybrid_b{}", std::process::id());
+    let domain = 98;
+    let nodes = seed_nodes();
+    let seed = seed_path();
+    let mut alone = spawn_in(a, 5, domain, &prefix, &["--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"]);
+    alone.wait_ready_with(nodes);
+    let joiner = |id: u32, inserts: &str| {
+        let mut agent = spawn_in(b, id, domain, &prefix, &["--join-wait-ms", "20000", "--insert-nodes", inserts]);
+        agent.wait_for(
+            "joined",
+            Duration::from_secs(30),
+            |s| s.ready && s.nodes >= nodes,
+            |s| s.ready && s.nodes < nodes,
+        );
+        agent
+    };
+    let mut first = joiner(6, "3");
+    let mut second = joiner(7, "2");
+    converge(&mut [&mut alone, &mut first, &mut second], nodes + 5);
+    wait_on_lanes(&mut first, 1);
+    wait_on_lanes(&mut second, 1);
+    let status = alone.latest().cloned().expect("a status line");
+    assert_eq!(status.same_host_peers, 0, "the other namespace is another host: {status:?}");
+    assert_eq!(status.shm_samples_received, 0, "nothing reaches another host by shared memory: {status:?}");
+    assert!(status.samples_received > 0, "the pair's deltas reach it by RTPS: {status:?}");
+
+    // The pair loses one of its own; its new life finds the lanes and the other host again.
+    signal(&second.child, "KILL");
+    let _ = second.child.wait();
+    let mut again = joiner(7, "0");
+    converge(&mut [&mut alone, &mut first, &mut again], nodes + 5);
+    wait_on_lanes(&mut again, 1);
+}
