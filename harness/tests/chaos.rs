@@ -101,6 +101,38 @@ fn a_secured_campaign_converges_after_every_fault_and_matches_the_specification(
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// Issue 20: the campaign with every agent on one host (`--same-host`: one network namespace), so the default
+/// transport moves their samples through shared memory; the process faults (pause, kill and restart, late join)
+/// converge and match the specification as over RTPS.
+#[test]
+fn a_same_host_campaign_over_shared_memory_converges_after_every_process_fault() {
+    if !is_root() {
+        eprintln!("note: not root, so the chaos campaign (network namespaces) does not run");
+        return;
+    }
+    let out = std::env::temp_dir().join(format!("cortex-chaos-same-host-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let output = Command::new(env!("CARGO_BIN_EXE_cortex"))
+        .args(["chaos", "--same-host", "--seed", "3", "--agents", "4", "--rounds", "2", "--fault-ms", "1500"])
+        .args(["--settle-ms", "60000", "--domain", "43", "--out"])
+        .arg(&out)
+        .output()
+        .expect("cortex runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
+    assert!(stdout.contains("seed 3: converged, nothing lost"), "{stdout}");
+    let verdict: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("seed-3/verdict.json")).unwrap()).unwrap();
+    assert_eq!(verdict["passed"], true, "{verdict}");
+    assert_eq!(verdict["config"]["same_host"], true, "{verdict}");
+    assert!(verdict["shm_samples_received"].as_u64() > Some(0), "nothing went through shared memory: {verdict}");
+    let kinds: Vec<&str> =
+        verdict["episodes"].as_array().unwrap().iter().map(|e| e["kind"].as_str().unwrap()).collect();
+    assert_eq!(kinds.len(), 3 + 2, "{kinds:?}");
+    assert!(kinds.iter().all(|k| ["pause", "kill+restart", "late join"].contains(k)), "{kinds:?}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 /// The campaign catches a planted protocol bug on real processes: with announces lost after the first, nothing
 /// tells the agents what they missed during a partition once the writers stop, so some heal does not converge;
 /// the campaign stops there, says so and exits with code 3.

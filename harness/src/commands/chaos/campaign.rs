@@ -81,7 +81,7 @@ impl Campaign {
     ) -> Result<Campaign> {
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let _ = std::fs::remove_dir_all(dir.join("agents"));
-        let network = Network::create(tag, config.agents)?;
+        let network = Network::create(tag, config.agents, config.same_host)?;
         let history_path = dir.join("history.jsonl");
         let history = std::io::BufWriter::new(
             std::fs::File::create(&history_path).with_context(|| format!("creating {}", history_path.display()))?,
@@ -513,6 +513,8 @@ impl Campaign {
         let duration_ms = self.now_ms();
         let finals = running.iter().filter_map(|s| Some((*s, self.slots[*s].final_state.clone()?))).collect();
         let timeline = self.slots.iter().map(|s| s.segments.clone()).collect();
+        let status = |slot: &Slot| slot.status.as_ref().map(|(_, s)| s.clone()).unwrap_or_default();
+        let shm_samples_received = running.iter().map(|s| status(&self.slots[*s]).shm_samples_received).sum();
         for slot in &mut self.slots {
             if let Some(proc) = slot.proc.take() {
                 proc.stop();
@@ -527,6 +529,7 @@ impl Campaign {
             skipped: self.skipped,
             problems: std::mem::take(&mut self.problems),
             duration_ms,
+            shm_samples_received,
         })
     }
 }

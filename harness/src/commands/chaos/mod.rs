@@ -34,7 +34,7 @@ use clap::Args;
 use campaign::Campaign;
 use output::{CampaignReport, Summary};
 use record::CampaignConfig;
-use schedule::Schedule;
+use schedule::{Fault, Schedule};
 
 /// Exit code of a campaign that found a violation.
 pub const EXIT_VIOLATION: u8 = 3;
@@ -80,6 +80,12 @@ pub struct ChaosArgs {
     /// encrypted): the same faults and checks on a secured graph.
     #[arg(long)]
     pub security: bool,
+    /// Run every agent in one network namespace, so that they are on one host to each other and move their samples
+    /// through shared memory (the default transport's lanes; without this flag each agent is its own host and its
+    /// lanes carry nothing). The schedule then has the process faults only (pause, kill+restart, late join): the
+    /// network faults filter by namespace. Not with `--security` (shared memory would bypass it).
+    #[arg(long, conflicts_with = "security")]
+    pub same_host: bool,
     /// Plant this protocol bug in every agent (an `agent::mutants::ProtocolMutant` name, e.g.
     /// `IncarnationForgotten`), to check that the campaign catches it. Only in a build with the `mutants` feature.
     #[cfg(feature = "mutants")]
@@ -155,10 +161,12 @@ fn run_one(
         join_wait_ms: args.join_wait_ms,
         domain: args.domain,
         security: args.security,
+        same_host: args.same_host,
         #[cfg(feature = "mutants")]
         plant: args.plant.clone(),
     };
-    let schedule = Schedule::generate(seed, args.agents, args.rounds, args.fault_ms);
+    let kinds: &[&str] = if args.same_host { &Fault::PROCESS_KINDS } else { &Fault::KINDS };
+    let schedule = Schedule::generate(seed, args.agents, args.rounds, args.fault_ms, kinds);
     let dir = args.out.join(format!("seed-{seed}"));
     let tag = format!("cx{}", std::process::id());
     let mut provenance = measure::provenance::Provenance::current();

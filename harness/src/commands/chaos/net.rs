@@ -31,6 +31,8 @@ pub struct Filter {
 pub struct Network {
     tag: String,
     created: Vec<String>,
+    /// Every agent slot in the namespace of slot 0 (`cortex chaos --same-host`).
+    same_host: bool,
 }
 
 /// Checks that this process can build the network: root, `ip` (iproute2) and `nft` (nftables).
@@ -60,13 +62,15 @@ fn run(args: &[&str]) -> Result<()> {
 }
 
 impl Network {
-    /// Creates the hub and `agents` agent namespaces, named after `tag` (e.g. `cx1234`).
+    /// Creates the hub and `agents` agent namespaces, named after `tag` (e.g. `cx1234`); with `same_host`, one
+    /// agent namespace that every slot shares.
     ///
     /// # Errors
     /// A command failed (its standard error is quoted); what was created is deleted again.
-    pub fn create(tag: &str, agents: usize) -> Result<Network> {
+    pub fn create(tag: &str, agents: usize, same_host: bool) -> Result<Network> {
         remove_stale();
-        let mut network = Network { tag: tag.to_owned(), created: Vec::new() };
+        let mut network = Network { tag: tag.to_owned(), created: Vec::new(), same_host };
+        let agents = if same_host { 1 } else { agents };
         let hub = network.hub();
         network.add_namespace(&hub)?;
         run(&["ip", "-n", &hub, "link", "set", "lo", "up"])?;
@@ -100,8 +104,9 @@ impl Network {
         format!("{}-hub", self.tag)
     }
 
-    /// The namespace of agent slot `agent`.
+    /// The namespace of agent slot `agent` (slot 0's for every slot with `same_host`).
     pub fn namespace(&self, agent: usize) -> String {
+        let agent = if self.same_host { 0 } else { agent };
         format!("{}-a{agent}", self.tag)
     }
 

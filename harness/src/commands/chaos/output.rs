@@ -32,6 +32,9 @@ pub struct CampaignReport {
     pub skipped: u64,
     /// Milliseconds the campaign ran.
     pub duration_ms: f64,
+    /// Samples the lives running at the end took from same-host shared memory (zero unless `--same-host`).
+    #[serde(default)]
+    pub shm_samples_received: u64,
     /// How it was obtained.
     pub provenance: Provenance,
 }
@@ -58,6 +61,7 @@ impl CampaignReport {
             writes_by_kind,
             skipped: recorded.skipped,
             duration_ms: recorded.duration_ms,
+            shm_samples_received: recorded.shm_samples_received,
             provenance,
         }
     }

@@ -30,6 +30,9 @@ pub struct CampaignConfig {
     /// Whether the agents ran with DDS Security.
     #[serde(default)]
     pub security: bool,
+    /// Whether every agent ran in one network namespace, on one host to each other (`--same-host`).
+    #[serde(default)]
+    pub same_host: bool,
     /// A protocol bug planted in every agent (tests of the campaign itself).
     #[cfg(feature = "mutants")]
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -193,4 +196,6 @@ pub struct Recorded {
     pub problems: Vec<String>,
     /// Milliseconds the campaign ran.
     pub duration_ms: f64,
+    /// Samples the lives running at the end took from same-host shared memory (their last status lines).
+    pub shm_samples_received: u64,
 }

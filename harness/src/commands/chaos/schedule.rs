@@ -76,6 +76,10 @@ impl Fault {
     pub const KINDS: [&'static str; 7] =
         ["loss", "one-way loss", "partition", "pause", "kill+restart", "kill+restart alone", "late join"];
 
+    /// The kinds that need no network fault (what `cortex chaos --same-host` draws from): a kill whose new life is
+    /// isolated needs its namespace cut off.
+    pub const PROCESS_KINDS: [&'static str; 3] = ["pause", "kill+restart", "late join"];
+
     /// A one-line description.
     pub fn describe(&self) -> String {
         let set = |s: &BTreeSet<usize>| s.iter().map(|a| format!("a{a}")).collect::<Vec<_>>().join(",");
@@ -111,15 +115,16 @@ pub struct Schedule {
 }
 
 impl Schedule {
-    /// The schedule of `seed` for `agents` slots (at least 3), `rounds` rounds and faults of `fault_ms`.
-    pub fn generate(seed: u64, agents: usize, rounds: usize, fault_ms: u64) -> Schedule {
+    /// The schedule of `seed` for `agents` slots (at least 3), `rounds` rounds and faults of `fault_ms`, one fault of
+    /// each of `kinds` ([`Fault::KINDS`], or [`Fault::PROCESS_KINDS`]) per round (`late join` in the first round only).
+    pub fn generate(seed: u64, agents: usize, rounds: usize, fault_ms: u64, kinds: &[&'static str]) -> Schedule {
         assert!(agents >= 3, "a campaign needs at least 3 agents");
         let mut rng = SplitMix64::new(seed ^ 0xC4A0_5EED);
         let late = agents - 1;
         let mut running: Vec<usize> = (0..late).collect();
         let mut episodes = Vec::new();
         for round in 0..rounds {
-            let mut kinds: Vec<&str> = Fault::KINDS.to_vec();
+            let mut kinds: Vec<&str> = kinds.to_vec();
             if round > 0 {
                 kinds.retain(|k| *k != "late join");
             }
@@ -179,15 +184,15 @@ mod tests {
 
     #[test]
     fn one_seed_one_schedule_every_kind_once_per_round_and_nothing_touches_the_late_agent_before_it_joins() {
-        let a = Schedule::generate(1, 4, 2, 3000);
-        assert_eq!(a, Schedule::generate(1, 4, 2, 3000));
-        assert_ne!(a, Schedule::generate(2, 4, 2, 3000));
+        let a = Schedule::generate(1, 4, 2, 3000, &Fault::KINDS);
+        assert_eq!(a, Schedule::generate(1, 4, 2, 3000, &Fault::KINDS));
+        assert_ne!(a, Schedule::generate(2, 4, 2, 3000, &Fault::KINDS));
         assert_eq!(a.episodes.len(), 7 + 6);
         for kind in Fault::KINDS {
             assert_eq!(a.episodes[..7].iter().filter(|e| e.fault.kind() == kind).count(), 1, "{kind}");
         }
         for seed in 0..50 {
-            let schedule = Schedule::generate(seed, 3, 2, 2000);
+            let schedule = Schedule::generate(seed, 3, 2, 2000, &Fault::KINDS);
             let joined = schedule.episodes.iter().position(|e| matches!(e.fault, Fault::LateJoin { .. })).unwrap();
             for episode in &schedule.episodes[..joined] {
                 let touched: Vec<usize> = match &episode.fault {
