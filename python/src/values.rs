@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use bytes::Bytes;
-use dsr::{Dictionary, Value, ValueType};
+use dsr::{Dictionary, Numbers, Value, ValueType};
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
@@ -99,14 +99,14 @@ fn from_array(array: &Bound<'_, PyUntypedArray>) -> PyResult<Value> {
     if let Ok(array) = array.cast::<PyArrayDyn<f32>>() {
         let array = array.readonly();
         return Ok(Value::VecF32(match array.as_slice() {
-            Ok(slice) => Arc::from(slice),
+            Ok(slice) => Numbers::from(slice),
             Err(_) => array.as_array().iter().copied().collect(),
         }));
     }
     if let Ok(array) = array.cast::<PyArrayDyn<u64>>() {
         let array = array.readonly();
         return Ok(Value::VecU64(match array.as_slice() {
-            Ok(slice) => Arc::from(slice),
+            Ok(slice) => Numbers::from(slice),
             Err(_) => array.as_array().iter().copied().collect(),
         }));
     }
@@ -187,7 +187,7 @@ pub fn convert(value: &Value, wanted: ValueType) -> Option<Value> {
             ValueType::F32x3 => Value::F32x3(values.try_into().ok()?),
             ValueType::F32x4 => Value::F32x4(values.try_into().ok()?),
             ValueType::F32x6 => Value::F32x6(values.try_into().ok()?),
-            ValueType::VecF32 => Value::VecF32(Arc::from(values)),
+            ValueType::VecF32 => Value::VecF32(Numbers::from(values)),
             _ => return None,
         })
     };

@@ -25,7 +25,7 @@ use bytes::Bytes;
 use crate::error::DictionaryError;
 pub use crate::ids::MAX_NAME_LEN;
 use crate::ids::Name;
-use crate::value::{AttrType, ValueType};
+use crate::value::{AttrType, Numbers, ValueType};
 
 /// A typed attribute key: the name plus, in the type parameter, the Rust type of its values.
 ///
@@ -49,7 +49,7 @@ use crate::value::{AttrType, ValueType};
 /// use dsr::{NewNode, Replica, ReplicaId, attrs};
 /// let mut replica = Replica::new(ReplicaId(1));
 /// let (id, _) = replica.insert_node(0, NewNode::new("world", "world")).unwrap();
-/// let translation: Arc<[f32]> = Arc::from([0.0f32, 0.0, 100.0]);
+/// let translation: Numbers<f32> = Arc::from([0.0f32, 0.0, 100.0]);
 /// replica.set_attr(1, id, attrs::RT_TRANSLATION, translation).unwrap();
 /// ```
 pub struct AttrKey<T> {
@@ -110,10 +110,10 @@ macro_rules! builtin_attributes {
 
 builtin_attributes! {
     // Geometry (RT edges and the kinematic tree).
-    RT_TRANSLATION: Arc<[f32]> = "rt_translation", "Translation of an RT edge, parent to child, in mm (3 values).";
-    RT_ROTATION_EULER_XYZ: Arc<[f32]> = "rt_rotation_euler_xyz", "Rotation of an RT edge as Euler angles x, y, z in rad, applied as Rx·Ry·Rz (3 values).";
-    TRANSLATION: Arc<[f32]> = "translation", "Legacy name of `rt_translation` (older CORTEX graphs).";
-    ROTATION_EULER_XYZ: Arc<[f32]> = "rotation_euler_xyz", "Legacy name of `rt_rotation_euler_xyz` (older CORTEX graphs).";
+    RT_TRANSLATION: Numbers<f32> = "rt_translation", "Translation of an RT edge, parent to child, in mm (3 values).";
+    RT_ROTATION_EULER_XYZ: Numbers<f32> = "rt_rotation_euler_xyz", "Rotation of an RT edge as Euler angles x, y, z in rad, applied as Rx·Ry·Rz (3 values).";
+    TRANSLATION: Numbers<f32> = "translation", "Legacy name of `rt_translation` (older CORTEX graphs).";
+    ROTATION_EULER_XYZ: Numbers<f32> = "rotation_euler_xyz", "Legacy name of `rt_rotation_euler_xyz` (older CORTEX graphs).";
     PARENT: u64 = "parent", "Id of the node's parent in the RT tree (0: none).";
     LEVEL: i32 = "level", "Depth of the node in the RT tree (the root is 0).";
     POS_X: f32 = "pos_x", "X position of the node in graph drawings.";
@@ -147,16 +147,16 @@ builtin_attributes! {
     ROBOT_REF_ADV_SPEED: f32 = "robot_ref_adv_speed", "Reference advance speed of the robot.";
     ROBOT_REF_ROT_SPEED: f32 = "robot_ref_rot_speed", "Reference rotation speed of the robot.";
     ROBOT_REF_SIDE_SPEED: f32 = "robot_ref_side_speed", "Reference side speed of the robot.";
-    ROBOT_LOCAL_LINEAR_VELOCITY: Arc<[f32]> = "robot_local_linear_velocity", "Linear velocity of the robot in its own frame.";
-    ROBOT_CURRENT_LINEAR_SPEED: Arc<[f32]> = "robot_current_linear_speed", "Current linear speed of the robot (on its RT edge).";
-    ROBOT_CURRENT_ANGULAR_SPEED: Arc<[f32]> = "robot_current_angular_speed", "Current angular speed of the robot (on its RT edge).";
-    LINEAR_SPEED: Arc<[f32]> = "linear_speed", "Legacy name of `robot_current_linear_speed`.";
-    ANGULAR_SPEED: Arc<[f32]> = "angular_speed", "Legacy name of `robot_current_angular_speed`.";
+    ROBOT_LOCAL_LINEAR_VELOCITY: Numbers<f32> = "robot_local_linear_velocity", "Linear velocity of the robot in its own frame.";
+    ROBOT_CURRENT_LINEAR_SPEED: Numbers<f32> = "robot_current_linear_speed", "Current linear speed of the robot (on its RT edge).";
+    ROBOT_CURRENT_ANGULAR_SPEED: Numbers<f32> = "robot_current_angular_speed", "Current angular speed of the robot (on its RT edge).";
+    LINEAR_SPEED: Numbers<f32> = "linear_speed", "Legacy name of `robot_current_linear_speed`.";
+    ANGULAR_SPEED: Numbers<f32> = "angular_speed", "Legacy name of `robot_current_angular_speed`.";
     BATTERY_LOAD: i32 = "battery_load", "Battery load, percent.";
     PLAN_TARGET_NODE_ID: i32 = "plan_target_node_id", "Node the current plan targets.";
-    VIRIATO_HEAD_PAN_TILT_NOSE_TARGET: Arc<[f32]> = "viriato_head_pan_tilt_nose_target", "Gaze target of Viriato's pan-tilt head.";
-    VIRIATO_PAN_TILT_NOSE_TARGET: Arc<[f32]> = "viriato_pan_tilt_nose_target", "Legacy gaze target of Viriato's pan-tilt head.";
-    VIRIATO_LEFT_ARM_TARGET: Arc<[f32]> = "viriato_left_arm_target", "Target of Viriato's left arm.";
+    VIRIATO_HEAD_PAN_TILT_NOSE_TARGET: Numbers<f32> = "viriato_head_pan_tilt_nose_target", "Gaze target of Viriato's pan-tilt head.";
+    VIRIATO_PAN_TILT_NOSE_TARGET: Numbers<f32> = "viriato_pan_tilt_nose_target", "Legacy gaze target of Viriato's pan-tilt head.";
+    VIRIATO_LEFT_ARM_TARGET: Numbers<f32> = "viriato_left_arm_target", "Target of Viriato's left arm.";
     // Devices and agents.
     PORT: i32 = "port", "Network port of a device's driver.";
     IFCONFIG: Arc<str> = "ifconfig", "Network interface of a device's driver.";
@@ -196,13 +196,13 @@ builtin_attributes! {
     CAM_DEPTH_FOCALY: i32 = "cam_depth_focaly", "Focal length along y of the depth camera, px.";
     CAM_DEPTH_ALIVETIME: i32 = "cam_depth_alivetime", "Time the depth camera has been alive.";
     // Lasers and point clouds.
-    LASER_DISTS: Arc<[f32]> = "laser_dists", "Laser ranges, mm, one per beam.";
-    LASER_ANGLES: Arc<[f32]> = "laser_angles", "Laser beam angles, rad, one per beam.";
-    LASER_INTENSITIES: Arc<[f32]> = "laser_intensities", "Laser intensities, one per beam.";
-    LIDAR_POINTS_X: Arc<[f32]> = "lidar_points_x", "Point cloud x coordinates in the sensor frame, mm.";
-    LIDAR_POINTS_Y: Arc<[f32]> = "lidar_points_y", "Point cloud y coordinates in the sensor frame, mm.";
-    LIDAR_POINTS_Z: Arc<[f32]> = "lidar_points_z", "Point cloud z coordinates in the sensor frame, mm.";
-    LIDAR_INTENSITY: Arc<[f32]> = "lidar_intensity", "Point cloud intensities.";
+    LASER_DISTS: Numbers<f32> = "laser_dists", "Laser ranges, mm, one per beam.";
+    LASER_ANGLES: Numbers<f32> = "laser_angles", "Laser beam angles, rad, one per beam.";
+    LASER_INTENSITIES: Numbers<f32> = "laser_intensities", "Laser intensities, one per beam.";
+    LIDAR_POINTS_X: Numbers<f32> = "lidar_points_x", "Point cloud x coordinates in the sensor frame, mm.";
+    LIDAR_POINTS_Y: Numbers<f32> = "lidar_points_y", "Point cloud y coordinates in the sensor frame, mm.";
+    LIDAR_POINTS_Z: Numbers<f32> = "lidar_points_z", "Point cloud z coordinates in the sensor frame, mm.";
+    LIDAR_INTENSITY: Numbers<f32> = "lidar_intensity", "Point cloud intensities.";
     // Inertial, odometry, pose and satellite positioning.
     IMU_ANGULAR_VELOCITY: [f32; 3] = "imu_angular_velocity", "IMU angular velocity, rad/s.";
     IMU_LINEAR_ACCELERATION: [f32; 3] = "imu_linear_acceleration", "IMU linear acceleration, m/s².";

@@ -19,7 +19,7 @@ use crate::dictionary::attrs;
 use crate::error::OpError;
 use crate::ids::{EdgeKey, NodeId};
 use crate::replica::{EdgeRef, Replica};
-use crate::value::Value;
+use crate::value::{Numbers, Value};
 
 /// The edge type of geometric edges.
 pub const RT: &str = "RT";
@@ -213,8 +213,8 @@ impl Replica {
     ) -> Result<Vec<Arc<Delta>>, OpError> {
         let key = EdgeKey::new(parent, child, RT);
         let pose = [
-            (attrs::RT_TRANSLATION.name(), Value::VecF32(Arc::from(translation_mm))),
-            (attrs::RT_ROTATION_EULER_XYZ.name(), Value::VecF32(Arc::from(euler_xyz_rad))),
+            (attrs::RT_TRANSLATION.name(), Value::VecF32(Numbers::from(translation_mm))),
+            (attrs::RT_ROTATION_EULER_XYZ.name(), Value::VecF32(Numbers::from(euler_xyz_rad))),
         ];
         if self.edge(&key).is_some() {
             return Ok(vec![self.set_attrs(now_ns, &key, pose)?]);

@@ -134,7 +134,7 @@ pub use replica::{
     Attributes, Change, ChangeEvent, Digest, EdgeRef, LogLimits, Missing, NewNode, NodeRef, Replica, VisibleAttr,
     VisibleGraph, VisibleNode,
 };
-pub use value::{AttrType, Value, ValueType};
+pub use value::{AttrType, Numbers, Value, ValueType};
 
 /// The README's Rust examples, compiled and run as doctests so the README stays true.
 #[cfg(doctest)]

@@ -1,14 +1,19 @@
 //! Attribute values: the 14 CORTEX value types.
 //!
-//! Large payloads (camera images, laser scans, point clouds) live in shared buffers (`bytes::Bytes`, `Arc<[T]>`),
+//! Large payloads (camera images, laser scans, point clouds) live in shared buffers (`bytes::Bytes`, [`Numbers`]),
 //! so a value is cloned by reference count, never by copying its contents. Decoding a value from the wire copies
-//! its payload exactly once, into its final buffer; encoding copies it once, into the output buffer.
+//! its payload at most once, into its final buffer, and not at all when it is decoded from a shared buffer and
+//! large (a byte value: `Delta::decode_shared`; a numeric vector: when aligned too, see [`Numbers`]); encoding
+//! copies it once, into the output buffer.
 
 use std::fmt;
 use std::sync::Arc;
 
 use bytes::Bytes;
 use serde::{Deserialize, Serialize};
+
+mod numbers;
+pub use numbers::Numbers;
 
 /// The type of an attribute value. The discriminants are CORTEX's JSON type codes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -113,7 +118,7 @@ pub enum Value {
     /// A 32-bit float.
     F32(f32),
     /// A vector of 32-bit floats (laser distances, point coordinates, CORTEX's `rt_translation`).
-    VecF32(#[serde(with = "f32_slice")] Arc<[f32]>),
+    VecF32(#[serde(with = "f32_slice")] Numbers<f32>),
     /// A boolean.
     Bool(bool),
     /// A byte vector (camera images, opaque payloads).
@@ -125,7 +130,7 @@ pub enum Value {
     /// A 64-bit float.
     F64(f64),
     /// A vector of 64-bit unsigned integers.
-    VecU64(#[serde(with = "u64_slice")] Arc<[u64]>),
+    VecU64(#[serde(with = "u64_slice")] Numbers<u64>),
     /// Two 32-bit floats.
     F32x2([f32; 2]),
     /// Three 32-bit floats.
@@ -341,13 +346,13 @@ macro_rules! attr_type {
 attr_type!(Arc<str>, String, Arc::clone);
 attr_type!(i32, I32, |v: &i32| *v);
 attr_type!(f32, F32, |v: &f32| *v);
-attr_type!(Arc<[f32]>, VecF32, Arc::clone);
+attr_type!(Numbers<f32>, VecF32, Numbers::clone);
 attr_type!(bool, Bool, |v: &bool| *v);
 attr_type!(Bytes, Bytes, Bytes::clone);
 attr_type!(u32, U32, |v: &u32| *v);
 attr_type!(u64, U64, |v: &u64| *v);
 attr_type!(f64, F64, |v: &f64| *v);
-attr_type!(Arc<[u64]>, VecU64, Arc::clone);
+attr_type!(Numbers<u64>, VecU64, Numbers::clone);
 attr_type!([f32; 2], F32x2, |v: &[f32; 2]| *v);
 attr_type!([f32; 3], F32x3, |v: &[f32; 3]| *v);
 attr_type!([f32; 4], F32x4, |v: &[f32; 4]| *v);
@@ -372,13 +377,13 @@ value_from!(i32, f32, bool, u32, u64, f64, [f32; 2], [f32; 3], [f32; 4], [f32; 6
 
 impl From<Vec<f32>> for Value {
     fn from(values: Vec<f32>) -> Self {
-        Value::VecF32(Arc::from(values))
+        Value::VecF32(Numbers::from(values))
     }
 }
 
 impl From<Vec<u64>> for Value {
     fn from(values: Vec<u64>) -> Self {
-        Value::VecU64(Arc::from(values))
+        Value::VecU64(Numbers::from(values))
     }
 }
 
@@ -408,89 +413,98 @@ mod arc_str {
     }
 }
 
-/// Encodes `Arc<[f32]>` as one byte string of little-endian floats, so decoding fills the final buffer in one copy.
+/// Encodes `Numbers<f32>` as one byte string of little-endian floats, so decoding fills the final buffer in one copy,
+/// or none (a view of the shared buffer being decoded, see [`Numbers`]).
 mod f32_slice {
     use super::*;
 
-    pub fn serialize<S: serde::Serializer>(values: &Arc<[f32]>, serializer: S) -> Result<S::Ok, S::Error> {
-        // Short vectors (an RT edge's three values) go through a stack buffer, not an allocation.
-        const SHORT: usize = 16;
-        if values.len() <= SHORT {
-            let mut bytes = [[0u8; 4]; SHORT];
-            for (chunk, value) in bytes.iter_mut().zip(values.iter()) {
-                *chunk = value.to_le_bytes();
-            }
-            let bytes = bytes.as_flattened();
-            return serializer.serialize_bytes(&bytes[..values.len() * 4]);
-        }
-        let mut bytes = Vec::with_capacity(values.len() * 4);
-        for value in values.iter() {
-            bytes.extend_from_slice(&value.to_le_bytes());
-        }
-        serializer.serialize_bytes(&bytes)
+    pub fn serialize<S: serde::Serializer>(values: &Numbers<f32>, serializer: S) -> Result<S::Ok, S::Error> {
+        super::serialize_numbers(values, serializer)
     }
 
-    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Arc<[f32]>, D::Error> {
-        deserializer.deserialize_bytes(Visitor)
-    }
-
-    struct Visitor;
-
-    impl serde::de::Visitor<'_> for Visitor {
-        type Value = Arc<[f32]>;
-        fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-            f.write_str("a byte string of little-endian f32 values")
-        }
-        fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[f32]>, E> {
-            if !bytes.len().is_multiple_of(4) {
-                return Err(E::custom(format!("f32 vector of {} bytes is not a multiple of 4", bytes.len())));
-            }
-            Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
-        }
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Numbers<f32>, D::Error> {
+        deserializer.deserialize_bytes(NumbersVisitor::<f32>(std::marker::PhantomData))
     }
 }
 
-/// Encodes `Arc<[u64]>` as one byte string of little-endian integers.
+/// Encodes `Numbers<u64>` as one byte string of little-endian integers (as `f32_slice`).
 mod u64_slice {
     use super::*;
 
-    pub fn serialize<S: serde::Serializer>(values: &Arc<[u64]>, serializer: S) -> Result<S::Ok, S::Error> {
-        const SHORT: usize = 8;
-        if values.len() <= SHORT {
-            let mut bytes = [[0u8; 8]; SHORT];
-            for (chunk, value) in bytes.iter_mut().zip(values.iter()) {
-                *chunk = value.to_le_bytes();
-            }
-            let bytes = bytes.as_flattened();
-            return serializer.serialize_bytes(&bytes[..values.len() * 8]);
-        }
-        let mut bytes = Vec::with_capacity(values.len() * 8);
-        for value in values.iter() {
-            bytes.extend_from_slice(&value.to_le_bytes());
-        }
-        serializer.serialize_bytes(&bytes)
+    pub fn serialize<S: serde::Serializer>(values: &Numbers<u64>, serializer: S) -> Result<S::Ok, S::Error> {
+        super::serialize_numbers(values, serializer)
     }
 
-    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Arc<[u64]>, D::Error> {
-        deserializer.deserialize_bytes(Visitor)
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Numbers<u64>, D::Error> {
+        deserializer.deserialize_bytes(NumbersVisitor::<u64>(std::marker::PhantomData))
     }
+}
 
-    struct Visitor;
+/// A number type of a vector value: `f32` or `u64`, little-endian on the wire.
+trait WireNumber: bytemuck::Pod {
+    const NAME: &'static str;
+    fn from_le(bytes: &[u8]) -> Self;
+    fn put_le(self, out: &mut Vec<u8>);
+}
 
-    impl serde::de::Visitor<'_> for Visitor {
-        type Value = Arc<[u64]>;
-        fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-            f.write_str("a byte string of little-endian u64 values")
+impl WireNumber for f32 {
+    const NAME: &'static str = "f32";
+    fn from_le(bytes: &[u8]) -> Self {
+        f32::from_le_bytes(bytes.try_into().unwrap_or_default())
+    }
+    fn put_le(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+}
+
+impl WireNumber for u64 {
+    const NAME: &'static str = "u64";
+    fn from_le(bytes: &[u8]) -> Self {
+        u64::from_le_bytes(bytes.try_into().unwrap_or_default())
+    }
+    fn put_le(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+}
+
+/// One byte string of little-endian values: the values' own bytes on a little-endian host, no conversion.
+fn serialize_numbers<T: WireNumber, S: serde::Serializer>(values: &[T], serializer: S) -> Result<S::Ok, S::Error> {
+    if cfg!(target_endian = "little") {
+        return serializer.serialize_bytes(bytemuck::cast_slice(values));
+    }
+    let mut bytes = Vec::with_capacity(std::mem::size_of_val(values));
+    for value in values {
+        value.put_le(&mut bytes);
+    }
+    serializer.serialize_bytes(&bytes)
+}
+
+struct NumbersVisitor<T>(std::marker::PhantomData<T>);
+
+impl<T: WireNumber> NumbersVisitor<T> {
+    fn copied<E: serde::de::Error>(bytes: &[u8]) -> Result<Numbers<T>, E> {
+        let size = std::mem::size_of::<T>();
+        if !bytes.len().is_multiple_of(size) {
+            return Err(E::custom(format!("{} vector of {} bytes is not a multiple of {size}", T::NAME, bytes.len())));
         }
-        fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Arc<[u64]>, E> {
-            if !bytes.len().is_multiple_of(8) {
-                return Err(E::custom(format!("u64 vector of {} bytes is not a multiple of 8", bytes.len())));
-            }
-            Ok(bytes
-                .chunks_exact(8)
-                .map(|c| u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
-                .collect())
-        }
+        Ok(bytes.chunks_exact(size).map(T::from_le).collect())
+    }
+}
+
+impl<'de, T: WireNumber> serde::de::Visitor<'de> for NumbersVisitor<T> {
+    type Value = Numbers<T>;
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "a byte string of little-endian {} values", T::NAME)
+    }
+    fn visit_borrowed_bytes<E: serde::de::Error>(self, bytes: &'de [u8]) -> Result<Numbers<T>, E> {
+        let view = SOURCE.with_borrow(|source| {
+            let source = source.as_ref()?;
+            shared_slice(source, bytes, VECTOR_SHARE_FRACTION).and_then(Numbers::view)
+        });
+        view.map_or_else(|| Self::copied(bytes), Ok)
+    }
+    fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Numbers<T>, E> {
+        Self::copied(bytes)
     }
 }
 
@@ -505,12 +519,15 @@ std::thread_local! {
 pub(crate) const SHARE_MIN_BYTES: usize = 4096;
 /// See [`SHARE_MIN_BYTES`].
 pub(crate) const SHARE_FRACTION: usize = 4;
+/// As [`SHARE_FRACTION`], for numeric vectors: a point cloud's four columns travel in one delta.
+pub(crate) const VECTOR_SHARE_FRACTION: usize = 8;
 
-/// `bytes` as a slice of `source` when it lies inside it and is worth sharing ([`SHARE_MIN_BYTES`]).
-fn shared_slice(source: &Bytes, bytes: &[u8]) -> Option<Bytes> {
+/// `bytes` as a slice of `source` when it lies inside it and is worth sharing: [`SHARE_MIN_BYTES`] and at least
+/// `1/fraction` of `source`.
+fn shared_slice(source: &Bytes, bytes: &[u8], fraction: usize) -> Option<Bytes> {
     let inside =
         source.as_ptr_range().contains(&bytes.as_ptr()) && bytes.as_ptr_range().end <= source.as_ptr_range().end;
-    let worth = bytes.len() >= SHARE_MIN_BYTES && bytes.len() * SHARE_FRACTION >= source.len();
+    let worth = bytes.len() >= SHARE_MIN_BYTES && bytes.len() * fraction >= source.len();
     (inside && worth).then(|| source.slice_ref(bytes))
 }
 
@@ -551,7 +568,7 @@ mod byte_buffer {
         }
         fn visit_borrowed_bytes<E: serde::de::Error>(self, bytes: &'de [u8]) -> Result<Bytes, E> {
             Ok(SOURCE
-                .with_borrow(|source| source.as_ref().and_then(|source| shared_slice(source, bytes)))
+                .with_borrow(|source| source.as_ref().and_then(|source| shared_slice(source, bytes, SHARE_FRACTION)))
                 .unwrap_or_else(|| Bytes::copy_from_slice(bytes)))
         }
         fn visit_bytes<E: serde::de::Error>(self, bytes: &[u8]) -> Result<Bytes, E> {

@@ -2,9 +2,9 @@
 //! parse → import → export → parse bit for bit, every malformed fixture must be refused with a message that names
 //! the place, a refused import must leave the replica as it was, and no mutation of a real file may panic.
 
+use dsr::Numbers;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use dsr::json::{self, Attributes, CortexGraph, CortexNode, JsonError, JsonWarning, Strictness};
 use dsr::{Dictionary, EdgeKey, NodeId, Replica, ReplicaId, Value};
@@ -106,7 +106,7 @@ fn real_graph_quirks_are_read_as_written() {
     assert_eq!(shadow.nodes[&NodeId(200)].attrs["parent"], Value::U64(100));
     assert_eq!(shadow.nodes[&NodeId(200)].attrs["base_target_x"], Value::F32(3600.0));
     let rt = &shadow.edges[&EdgeKey::new(NodeId(100), NodeId(200), "RT")];
-    assert_eq!(rt["rt_translation"], Value::VecF32(Arc::from([0.0f32, 0.0, 0.0])));
+    assert_eq!(rt["rt_translation"], Value::VecF32(Numbers::from([0.0f32, 0.0, 0.0])));
     // giraff: ids beyond 2^53 are kept exactly.
     let giraff = json::parse_bytes(&dataset("giraff_dsr.json")).unwrap();
     let largest = giraff.nodes.keys().next_back().unwrap().0;

@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use bica::prelude::*;
 use bytes::Bytes;
-use dsr::{Dot, NodeId, Value, attrs};
+use dsr::{Dot, NodeId, Numbers, Value, attrs};
 
 use crate::graph::{GraphAccess, GraphError, SharedGraph};
 
@@ -101,20 +101,20 @@ impl Image {
 #[derive(Debug, Clone, PartialEq)]
 pub struct LaserScan {
     /// Range of each beam, mm (non-finite or non-positive: no return).
-    pub dists_mm: Arc<[f32]>,
+    pub dists_mm: Numbers<f32>,
     /// Angle of each beam, rad (counter-clockwise from x).
-    pub angles_rad: Arc<[f32]>,
+    pub angles_rad: Numbers<f32>,
 }
 
 /// A 3-D point cloud in the sensor's frame, mm.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PointCloud {
     /// x coordinates.
-    pub x_mm: Arc<[f32]>,
+    pub x_mm: Numbers<f32>,
     /// y coordinates.
-    pub y_mm: Arc<[f32]>,
+    pub y_mm: Numbers<f32>,
     /// z coordinates.
-    pub z_mm: Arc<[f32]>,
+    pub z_mm: Numbers<f32>,
 }
 
 /// One IMU sample.

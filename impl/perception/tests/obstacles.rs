@@ -2,8 +2,6 @@
 //! independent quadratic single-linkage implementation; run as BICA components on a replica it keeps `obstacle`
 //! nodes with RT edges from the laser node, deletes them when the obstacles vanish, and survives malformed scans.
 
-use std::sync::Arc;
-
 use bica::prelude::*;
 use dsr::{NewNode, Replica, ReplicaId, attrs};
 use perception::fixtures;
@@ -197,7 +195,7 @@ fn detector_component_keeps_obstacle_nodes_in_the_graph_and_survives_malformed_s
     assert_eq!(runtime.step_failures(), 0);
     assert_eq!(replica.borrow().node_count(), before);
     // The obstacles vanish (no returns): the confirmed tracks die after their allowed misses and their nodes go.
-    let empty = LaserScan { dists_mm: Arc::from(vec![0.0f32; 811]), angles_rad: scans[0].scan.angles_rad.clone() };
+    let empty = LaserScan { dists_mm: vec![0.0f32; 811].into(), angles_rad: scans[0].scan.angles_rad.clone() };
     for k in 0..8u64 {
         write_scan(&mut *graph.borrow_mut(), now, laser, &empty, scans[9].stamp_ns + (k + 1) * 66_000_000, 100 + k)
             .unwrap();

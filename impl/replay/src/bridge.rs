@@ -36,7 +36,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 use bytes::Bytes;
-use dsr::{Delta, Dictionary, DictionaryError, EdgeKey, NewNode, NodeId, OpError, Replica, Value, attrs};
+use dsr::{Delta, Dictionary, DictionaryError, EdgeKey, NewNode, NodeId, Numbers, OpError, Replica, Value, attrs};
 use nalgebra::{Quaternion, UnitQuaternion};
 
 use crate::generic::{self, GenericError};
@@ -264,11 +264,11 @@ impl Bridge {
             }
             Ros2Message::PointCloud2(cloud) => {
                 let columns = cloud.columns(1000.0)?;
-                values.push((attrs::LIDAR_POINTS_X.name(), Value::VecF32(Arc::from(columns.x))));
-                values.push((attrs::LIDAR_POINTS_Y.name(), Value::VecF32(Arc::from(columns.y))));
-                values.push((attrs::LIDAR_POINTS_Z.name(), Value::VecF32(Arc::from(columns.z))));
+                values.push((attrs::LIDAR_POINTS_X.name(), Value::VecF32(Numbers::from(columns.x))));
+                values.push((attrs::LIDAR_POINTS_Y.name(), Value::VecF32(Numbers::from(columns.y))));
+                values.push((attrs::LIDAR_POINTS_Z.name(), Value::VecF32(Numbers::from(columns.z))));
                 if let Some(intensity) = columns.intensity {
-                    values.push((attrs::LIDAR_INTENSITY.name(), Value::VecF32(Arc::from(intensity))));
+                    values.push((attrs::LIDAR_INTENSITY.name(), Value::VecF32(Numbers::from(intensity))));
                 }
                 ("lidar", &cloud.header)
             }
@@ -277,11 +277,13 @@ impl Bridge {
                 let angles: Arc<[f32]> = (0..scan.ranges.len())
                     .map(|i| (f64::from(scan.angle_min) + i as f64 * f64::from(scan.angle_increment)) as f32)
                     .collect();
-                values.push((attrs::LASER_DISTS.name(), Value::VecF32(dists)));
-                values.push((attrs::LASER_ANGLES.name(), Value::VecF32(angles)));
+                values.push((attrs::LASER_DISTS.name(), Value::VecF32(dists.into())));
+                values.push((attrs::LASER_ANGLES.name(), Value::VecF32(angles.into())));
                 if !scan.intensities.is_empty() {
-                    values
-                        .push((attrs::LASER_INTENSITIES.name(), Value::VecF32(Arc::from(scan.intensities.as_slice()))));
+                    values.push((
+                        attrs::LASER_INTENSITIES.name(),
+                        Value::VecF32(Numbers::from(scan.intensities.as_slice())),
+                    ));
                 }
                 ("laser", &scan.header)
             }

@@ -225,12 +225,12 @@ impl Walker<'_> {
             Some(VectorKind::U64) => {
                 let values: Result<Arc<[u64]>, _> =
                     (0..count).map(|_| self.wire.primitive::<8>("").map(u64::from_le_bytes)).collect();
-                Value::VecU64(values.map_err(at)?)
+                Value::VecU64(values.map_err(at)?.into())
             }
             _ => {
                 let values: Result<Arc<[f32]>, Failure> =
                     (0..count).map(|_| self.number(primitive, path).map(|value| value as f32)).collect();
-                Value::VecF32(values?)
+                Value::VecF32(values?.into())
             }
         };
         self.emit(path, value);

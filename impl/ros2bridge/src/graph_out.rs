@@ -169,7 +169,7 @@ pub fn laser_scan(
 
 #[cfg(test)]
 mod tests {
-    use std::sync::Arc;
+    use dsr::Numbers;
 
     use bytes::Bytes;
     use dsr::{NewNode, ReplicaId};
@@ -212,8 +212,8 @@ mod tests {
                 3,
                 laser,
                 vec![
-                    (attrs::LASER_DISTS.name(), Value::VecF32(Arc::from([1000.0f32, 2500.0, 500.0]))),
-                    (attrs::LASER_ANGLES.name(), Value::VecF32(Arc::from([-0.5f32, 0.0, 0.5]))),
+                    (attrs::LASER_DISTS.name(), Value::VecF32(Numbers::from([1000.0f32, 2500.0, 500.0]))),
+                    (attrs::LASER_ANGLES.name(), Value::VecF32(Numbers::from([-0.5f32, 0.0, 0.5]))),
                     (attrs::STAMP_NS.name(), Value::U64(42)),
                 ],
             )

@@ -183,7 +183,10 @@ mod tests {
         assert!(!deltas.is_empty());
         let node = replica.node_by_name("/scan").expect("the topic's node");
         assert_eq!(node.node_type(), "laser");
-        assert_eq!(node.attr(attrs::LASER_DISTS.name()), Some(&Value::VecF32(Arc::from([1000.0f32, 2000.0, 3000.0]))));
+        assert_eq!(
+            node.attr(attrs::LASER_DISTS.name()),
+            Some(&Value::VecF32(dsr::Numbers::from([1000.0f32, 2000.0, 3000.0])))
+        );
         assert_eq!(node.attr(attrs::STAMP_NS.name()), Some(&Value::U64(3_000_000_000)));
         assert!(replica.node_by_name("laser").is_some(), "the header's frame becomes the node's parent");
         assert_eq!(inbound.counters()[0].written, 1);

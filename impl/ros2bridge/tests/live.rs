@@ -92,7 +92,7 @@ fn a_scan_from_a_ros2_publisher_reaches_the_graph_and_comes_back_out_and_a_trunc
     });
     let dists =
         agent.read(|replica| replica.node_by_name("/scan").and_then(|n| n.attr(attrs::LASER_DISTS.name()).cloned()));
-    assert_eq!(dists.flatten(), Some(Value::VecF32(Arc::from([1000.0f32, 2000.0, 4500.0]))));
+    assert_eq!(dists.flatten(), Some(Value::VecF32(dsr::Numbers::from([1000.0f32, 2000.0, 4500.0]))));
 
     let mut back = None;
     wait_until("the scan back out", || {

@@ -549,3 +549,40 @@ fn a_frame_decoded_from_a_shared_buffer_is_a_slice_of_it_and_small_values_are_co
         assert!(!snapshot.as_ptr_range().contains(&value.as_ptr()), "a snapshot's value holds the whole snapshot");
     }
 }
+
+/// A point cloud's columns decoded from a shared buffer are views of it (no copy per receiver) exactly when their
+/// bytes land aligned for `f32`, and copies otherwise; either way the same values. The wire does not pad vectors,
+/// so the test shifts the sample in its buffer by 0–3 bytes: each column is a view for exactly one of the shifts.
+#[test]
+fn point_cloud_columns_decoded_from_a_shared_buffer_are_views_when_aligned_and_copies_otherwise() {
+    let mut writer = Replica::new(ReplicaId(1));
+    let (lidar, _) = writer.insert_node(1, NewNode::new("lidar", "ouster")).unwrap();
+    let column = |k: f32| Value::VecF32((0..16_384).map(|i| i as f32 * k).collect());
+    let columns = [("lidar_points_x", column(1.0)), ("lidar_points_y", column(-0.5)), ("lidar_points_z", column(0.25))];
+    let delta = writer.set_attrs(2, lidar, columns.clone()).unwrap();
+    let encoded = delta.encode();
+    let mut views = [0usize; 3];
+    for shift in 0..4 {
+        let mut buffer = vec![0u8; shift];
+        buffer.extend_from_slice(&encoded);
+        let sample = bytes::Bytes::from(buffer).slice(shift..);
+        let decoded = Delta::decode_shared(&sample).unwrap();
+        assert_eq!(decoded, Delta::decode(&sample).unwrap());
+        let attrs = &decoded.store.nodes[&lidar].attrs;
+        for (k, (name, value)) in columns.iter().enumerate() {
+            let Value::VecF32(numbers) = &attrs[*name].values[0].value else { panic!("{name} is not a vec<f32>") };
+            assert_eq!(&Value::VecF32(numbers.clone()), value);
+            let inside = sample.as_ptr_range().contains(&numbers.as_ptr().cast());
+            assert_eq!(inside, numbers.is_view(), "{name}, shift {shift}");
+            // Where the column's bytes are in the sample (its first four floats are unique to it).
+            let head: Vec<u8> = numbers[..4].iter().flat_map(|v| v.to_le_bytes()).collect();
+            let at = sample.windows(16).position(|w| w == head.as_slice()).expect("the column is in the sample");
+            let aligned = sample[at..].as_ptr().align_offset(4) == 0;
+            assert_eq!(numbers.is_view(), aligned || !cfg!(target_endian = "little"), "{name}, shift {shift}");
+            views[k] += usize::from(numbers.is_view());
+        }
+    }
+    if cfg!(target_endian = "little") {
+        assert_eq!(views, [1, 1, 1], "shifts at which each column was a view");
+    }
+}

@@ -1,6 +1,7 @@
 //! Reading CORTEX JSON: the text to a generic tree that keeps duplicate keys, then the tree to a [`CortexGraph`].
 
 use super::*;
+use crate::value::Numbers;
 
 /// A parsed JSON value that keeps every key of an object, in order, so duplicates can be reported.
 #[derive(Clone, Debug, PartialEq)]
@@ -282,7 +283,7 @@ fn typed_value(value_type: ValueType, raw: &Json, path: &str) -> Result<Value, J
         },
         ValueType::I32 => scalar(integer::<i32>(raw, "i32").map(Value::I32)),
         ValueType::F32 => scalar(float32(raw).map(Value::F32)),
-        ValueType::VecF32 => Ok(Value::VecF32(items::<f32, Arc<[f32]>>(raw, path, float32)?)),
+        ValueType::VecF32 => Ok(Value::VecF32(items::<f32, Numbers<f32>>(raw, path, float32)?)),
         ValueType::Bool => match raw {
             Json::Bool(flag) => Ok(Value::Bool(*flag)),
             other => scalar(Err(Problem::Kind("true or false", describe(other)))),
@@ -294,7 +295,7 @@ fn typed_value(value_type: ValueType, raw: &Json, path: &str) -> Result<Value, J
         ValueType::U32 => scalar(integer::<u32>(raw, "u32").map(Value::U32)),
         ValueType::U64 => scalar(unsigned64(raw).map(Value::U64)),
         ValueType::F64 => scalar(number(raw).map(Value::F64)),
-        ValueType::VecU64 => Ok(Value::VecU64(items::<u64, Arc<[u64]>>(raw, path, unsigned64)?)),
+        ValueType::VecU64 => Ok(Value::VecU64(items::<u64, Numbers<u64>>(raw, path, unsigned64)?)),
         ValueType::F32x2 => Ok(Value::F32x2(floats(raw, path, value_type)?)),
         ValueType::F32x3 => Ok(Value::F32x3(floats(raw, path, value_type)?)),
         ValueType::F32x4 => Ok(Value::F32x4(floats(raw, path, value_type)?)),
