@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use agent::rtps::AgentTransport;
-use agent::{Agent, AgentConfig, AgentId, Control, GraphId};
+use agent::{Agent, AgentConfig, AgentId, Control, GraphId, Link};
 use anyhow::{Context, Result, anyhow, bail};
 use bica::clock::ns_from_ms;
 use bica::prelude::*;
@@ -113,10 +113,11 @@ pub struct AgentArgs {
     /// one graph may mix settings: each reads both.
     #[arg(long, value_enum, default_value_t = UpdatesArg::Reliable)]
     pub updates: UpdatesArg,
-    /// What carries the samples: `rtps` (DDS over UDP, any host), or `shm` (iceoryx2 shared memory, every agent of
-    /// the graph on this host and started with `--transport shm`; services `cortex/d<DOMAIN>/<PREFIX>/...`). The
-    /// hybrid (shared memory to same-host peers, RTPS to the others) is not written yet.
-    #[arg(long, value_enum, default_value_t = TransportArg::Rtps)]
+    /// What carries the samples: `rtps` (DDS over UDP, any host), or `shm` (iceoryx2 shared
+    /// memory, every agent of the graph on this host and started with `--transport shm`; services
+    /// `cortex/d<DOMAIN>/<PREFIX>/...`). The hybrid (shared memory to same-host peers, RTPS to the others) is not
+    /// written yet.
+    #[arg(long, value_enum, default_value_t = TransportArg(Link::Rtps))]
     pub transport: TransportArg,
     /// Where this agent records each life's incarnation (`DIR/d<DOMAIN>-<PREFIX>-a<ID>.life`), so that a restarted
     /// agent never takes an earlier life's replica id, even when no peer is reachable. Default
@@ -141,13 +142,26 @@ pub fn life_file(state_dir: Option<&str>, domain: u16, prefix: &str, id: u32) ->
     Some(dir.join(format!("d{domain}-{prefix}-a{id}.life")))
 }
 
-/// `--transport`: what carries an agent's samples.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum TransportArg {
-    /// RTPS (DDS over UDP), the default.
-    Rtps,
-    /// Shared memory between the agents of one host (`transport::shm::ShmTransport`), no RTPS.
-    Shm,
+/// `--transport`: what carries an agent's samples, one of [`Link::ALL`] by its name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TransportArg(pub Link);
+
+impl ValueEnum for TransportArg {
+    fn value_variants<'a>() -> &'a [Self] {
+        static ALL: std::sync::LazyLock<Vec<TransportArg>> =
+            std::sync::LazyLock::new(|| Link::ALL.into_iter().map(TransportArg).collect());
+        &ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        Some(PossibleValue::new(self.0.name()).help(self.0.summary()))
+    }
+}
+
+impl std::fmt::Display for TransportArg {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.0.name())
+    }
 }
 
 /// `--updates`: how the transport sends [`Channel::Updates`] ([`UpdateDelivery`]).
@@ -262,32 +276,19 @@ pub fn security_files(dir: Option<&std::path::Path>) -> Result<Option<transport:
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
     let life = life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id);
-    let agent = if args.transport == TransportArg::Shm {
-        if args.security.is_some() {
-            bail!("--security protects RTPS; it does not apply to --transport shm");
-        }
-        let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
-        let prefix = format!("cortex/d{}/{}", args.domain, args.topic_prefix);
-        agent::shm::start(config, &prefix, &transport::shm::ShmSettings::default(), args.faults)
-            .context("opening shared memory")?
-    } else {
-        let security = security_files(args.security.as_deref())?;
-        start_rtps_agent(
-            args.id,
-            args.graph_id,
-            args.join_wait_ms,
-            args.seed_json.as_deref(),
-            RtpsConfig {
-                domain_id: args.domain,
-                topic_prefix: args.topic_prefix.clone(),
-                updates: args.updates.into(),
-                security,
-                ..RtpsConfig::default()
-            },
-            args.faults,
-            life,
-        )?
+    let link = args.transport.0;
+    if link != Link::Rtps && args.security.is_some() {
+        bail!("--security protects RTPS; it does not apply to --transport {link}");
+    }
+    let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
+    let rtps = RtpsConfig {
+        domain_id: args.domain,
+        topic_prefix: args.topic_prefix.clone(),
+        updates: args.updates.into(),
+        security: security_files(args.security.as_deref())?,
+        ..RtpsConfig::default()
     };
+    let agent = link.start(config, rtps, args.faults).with_context(|| format!("starting the agent on {link}"))?;
     let stop = Arc::new(AtomicBool::new(false));
     let work = start_work(&args, &agent, &stop)?;
     {
