@@ -114,13 +114,13 @@ pub struct PayloadPathsExperiment {
 
 impl Default for PayloadPathsExperiment {
     /// `cortex bench payload`'s defaults: 16 B to 4 MiB (the 360,960 B camera frame among them) to 1, 2 and 8
-    /// receivers by every path, 20 samples each at 20 Hz.
+    /// receivers by every path, 40 samples each at 20 Hz (about two minutes on 2 cores).
     fn default() -> Self {
         PayloadPathsExperiment {
             sizes: vec![16, 1024, 65_536, 360_960, 1 << 20, 4 << 20],
             receivers: vec![1, 2, 8],
             paths: PayloadPath::all(),
-            count: 20,
+            count: 40,
             rate_hz: 20.0,
         }
     }
