@@ -146,23 +146,7 @@ pub fn life_file(state_dir: Option<&str>, domain: u16, prefix: &str, id: u32) ->
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TransportArg(pub Link);
 
-impl ValueEnum for TransportArg {
-    fn value_variants<'a>() -> &'a [Self] {
-        static ALL: std::sync::LazyLock<Vec<TransportArg>> =
-            std::sync::LazyLock::new(|| Link::ALL.into_iter().map(TransportArg).collect());
-        &ALL
-    }
-
-    fn to_possible_value(&self) -> Option<PossibleValue> {
-        Some(PossibleValue::new(self.0.name()).help(self.0.summary()))
-    }
-}
-
-impl std::fmt::Display for TransportArg {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.0.name())
-    }
-}
+super::value_enum_by_name!(TransportArg, Link::ALL);
 
 /// `--updates`: how the transport sends [`Channel::Updates`] ([`UpdateDelivery`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

@@ -8,8 +8,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context as _, Result};
-use clap::builder::PossibleValue;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use measure::bench::Counting;
 use measure::bench::payload::{self, table};
 use measure::netns::NetnsSetup;
@@ -21,23 +20,7 @@ use super::{NetnsMode, enter_netns, this_program};
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PathArg(pub PayloadPath);
 
-impl ValueEnum for PathArg {
-    fn value_variants<'a>() -> &'a [Self] {
-        static ALL: std::sync::LazyLock<Vec<PathArg>> =
-            std::sync::LazyLock::new(|| PayloadPath::all().into_iter().map(PathArg).collect());
-        &ALL
-    }
-
-    fn to_possible_value(&self) -> Option<PossibleValue> {
-        Some(PossibleValue::new(self.0.name()).help(self.0.summary()))
-    }
-}
-
-impl std::fmt::Display for PathArg {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.0.name())
-    }
-}
+crate::commands::value_enum_by_name!(PathArg, PayloadPath::all());
 
 fn default_paths() -> Vec<PathArg> {
     PayloadPathsExperiment::default().paths.into_iter().map(PathArg).collect()

@@ -177,11 +177,8 @@ impl LimitSender {
         let deadline = Instant::now() + timeout;
         let mut ready = std::collections::BTreeSet::new();
         while ready.len() < self.receivers && Instant::now() < deadline {
-            match self.next_answer(deadline)? {
-                Some([READY, index, _]) => {
-                    ready.insert(index);
-                }
-                Some(_) | None => {}
+            if let Some([READY, index, _]) = self.next_answer(deadline)? {
+                ready.insert(index);
             }
         }
         Ok(ready.len())
@@ -279,6 +276,9 @@ pub fn receive(prefix: &str, index: u64, wake: Wake, clock: &dyn Clock) -> Resul
     let names = ["ping", "pong", "ping-ev", "pong-ev"].map(|name| format!("{prefix}/{name}"));
     let [ping_name, pong_name, ping_events, pong_events] = &names;
     let service = |name: &str| -> Result<ServiceName, ShmError> { service_name(name) };
+    let event = |name: &str| {
+        node.service_builder(&service(name)?).event().open().map_err(|e| open_error("event service", name, e))
+    };
     let ping = node
         .service_builder(&service(ping_name)?)
         .publish_subscribe::<[u8]>()
@@ -289,22 +289,10 @@ pub fn receive(prefix: &str, index: u64, wake: Wake, clock: &dyn Clock) -> Resul
         .publish_subscribe::<Answer>()
         .open()
         .map_err(|e| open_error("service", pong_name, e))?;
-    let wake_up = node
-        .service_builder(&service(ping_events)?)
-        .event()
-        .open()
-        .map_err(|e| open_error("event service", ping_events, e))?
-        .listener_builder()
-        .create()
-        .map_err(|e| open_error("listener", ping_events, e))?;
-    let answered = node
-        .service_builder(&service(pong_events)?)
-        .event()
-        .open()
-        .map_err(|e| open_error("event service", pong_events, e))?
-        .notifier_builder()
-        .create()
-        .map_err(|e| open_error("notifier", pong_events, e))?;
+    let wake_up =
+        event(ping_events)?.listener_builder().create().map_err(|e| open_error("listener", ping_events, e))?;
+    let answered =
+        event(pong_events)?.notifier_builder().create().map_err(|e| open_error("notifier", pong_events, e))?;
     let frames = ping.subscriber_builder().create().map_err(|e| open_error("subscriber", ping_name, e))?;
     let answer = pong.publisher_builder().create().map_err(|e| open_error("publisher", pong_name, e))?;
     let reply = |message: Answer| -> Result<(), ShmError> {
