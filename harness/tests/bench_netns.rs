@@ -1,6 +1,6 @@
-//! `cortex bench fanout` and `cortex bench rtt` in fresh network namespaces, where the loopback counters count
-//! exactly the measurement's traffic. Creating a namespace needs root, `unshare` and `ip` (CI runs
-//! `scripts/test.sh` as root); without them these tests print why and skip. Nothing here asserts on speed: only on
+//! `cortex bench fanout`, `cortex bench rtt` and `cortex bench payload` in fresh network namespaces, where the
+//! loopback counters count exactly the measurement's traffic. Creating a namespace needs root, `unshare` and `ip`
+//! (CI runs `scripts/test.sh` as root); without them these tests print why and skip. Nothing here asserts on speed: only on
 //! bytes that must (or must not) have crossed the wire for the samples that were delivered.
 
 use std::process::Command;
@@ -142,5 +142,67 @@ fn rtt_in_a_namespace_counts_every_update_with_its_acknowledgements() {
             assert!(number(figures, &["socket", "bytes_per_update"]) < 4096.0, "{side}: {figures}");
             assert!(number(figures, &["socket", "discovery", "tx_bytes"]) > 0.0, "{side}: discovery was counted");
         }
+    }
+}
+
+#[test]
+fn bench_payload_reports_every_cell_and_no_loopback_bytes_through_shared_memory() {
+    if !namespaces_available() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("cortex-bench-payload-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let json_path = dir.join("payload.json");
+    let json = json_path.to_str().expect("utf-8 path");
+    // RTPS first, so the shared-memory cell also shows that nothing of the RTPS session leaks into its window.
+    let args = [
+        "bench",
+        "payload",
+        "--sizes",
+        "4096",
+        "--receivers",
+        "1",
+        "--count",
+        "5",
+        "--rate-hz",
+        "50",
+        "--paths",
+        "rtps,shm,iceoryx2",
+        "--netns",
+        "require",
+        "--json",
+        json,
+    ];
+    let output = Command::new(env!("CARGO_BIN_EXE_cortex")).args(args).output().expect("cortex runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{}\n{stdout}\n{}", output.status, String::from_utf8_lossy(&output.stderr));
+    let report: Value = serde_json::from_slice(&std::fs::read(&json_path).expect("the JSON file")).expect("JSON");
+    let _ = std::fs::remove_dir_all(&dir);
+
+    assert_eq!(report["netns"], Value::Bool(true), "{report}");
+    let cells = report["cells"].as_array().expect("cells");
+    let paths: Vec<&str> = cells.iter().map(|c| c["path"].as_str().expect("path")).collect();
+    assert_eq!(paths, ["rtps", "shm", "iceoryx2"], "one cell per path, in the order asked: {report}");
+    for cell in cells {
+        assert_eq!((number(cell, &["size_bytes"]), number(cell, &["receivers"])), (4096.0, 1.0), "{cell}");
+        assert_eq!(number(cell, &["expected"]), 5.0, "{cell}");
+        let delivered = number(cell, &["latency", "count"]);
+        assert!((1.0..=5.0).contains(&delivered), "{cell}");
+        assert!(number(cell, &["latency", "p50_ns"]) <= number(cell, &["latency", "max_ns"]), "{cell}");
+        assert!(number(cell, &["cpu_ns_per_sample"]) >= 0.0, "{cell}");
+        let agents = cell["path"] != "iceoryx2";
+        assert_eq!(cell["to_iceoryx2"].is_object(), agents, "agent cells carry ratios to raw iceoryx2: {cell}");
+    }
+    // At least one copy of every RTPS sample crossed the loopback; not one byte through shared memory.
+    assert!(number(&cells[0], &["loopback_bytes_per_sample"]) >= 4096.0, "{report}");
+    assert_eq!(number(&cells[1], &["loopback_bytes_per_sample"]), 0.0, "{report}");
+    assert_eq!(number(&cells[2], &["loopback_bytes_per_sample"]), 0.0, "{report}");
+    // The table: a heading, a header and a row per cell, with every column.
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert!(lines[0].starts_with("payload paths:") && lines[1].contains("loopback B/sample"), "{stdout}");
+    for (line, label) in lines[2..5].iter().zip(["agents, rtps", "agents, shm", "raw iceoryx2"]) {
+        assert!(line.contains(label) && line.contains("/5"), "{stdout}");
+        // 13 columns; the path's label is two words.
+        assert_eq!(line.split_whitespace().count(), 14, "{line}");
     }
 }

@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use agent::rtps::AgentTransport;
-use agent::{Agent, AgentConfig, AgentId, Control, GraphId};
+use agent::{Agent, AgentConfig, AgentId, Control, GraphId, Link};
 use anyhow::{Context, Result, anyhow, bail};
 use bica::clock::ns_from_ms;
 use bica::prelude::*;
@@ -35,7 +35,6 @@ use perception::roles::Role;
 use perception::sensors::{CameraReader, Image, LaserReader, write_image};
 use transport::fault::FaultConfig;
 use transport::rtps::{RtpsConfig, UpdateDelivery};
-use transport::shm::ShmSettings;
 
 /// Arguments of `cortex agent`.
 #[derive(Debug, Args)]
@@ -118,7 +117,7 @@ pub struct AgentArgs {
     /// host and network namespace: `transport::hybrid`), `rtps` (DDS over UDP alone), or `shm` (shared memory
     /// alone: every agent of the graph on this host and started with `--transport shm`; no discovery). With
     /// `--security`, `auto` is RTPS alone: shared memory would bypass the protection.
-    #[arg(long, value_enum, default_value_t = TransportArg::Auto)]
+    #[arg(long, value_enum, default_value_t = TransportArg(Link::Auto))]
     pub transport: TransportArg,
     /// Where this agent records each life's incarnation (`DIR/d<DOMAIN>-<PREFIX>-a<ID>.life`), so that a restarted
     /// agent never takes an earlier life's replica id, even when no peer is reachable. Default
@@ -143,16 +142,11 @@ pub fn life_file(state_dir: Option<&str>, domain: u16, prefix: &str, id: u32) ->
     Some(dir.join(format!("d{domain}-{prefix}-a{id}.life")))
 }
 
-/// `--transport`: what carries an agent's samples.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum TransportArg {
-    /// RTPS, with same-host shared memory beside it (`transport::hybrid::HybridTransport`), the default.
-    Auto,
-    /// RTPS (DDS over UDP) alone.
-    Rtps,
-    /// Shared memory between the agents of one host (`transport::shm::ShmTransport`), no RTPS.
-    Shm,
-}
+/// `--transport`: what carries an agent's samples, one of [`Link::ALL`] by its name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TransportArg(pub Link);
+
+super::value_enum_by_name!(TransportArg, Link::ALL);
 
 /// `--updates`: how the transport sends [`Channel::Updates`] ([`UpdateDelivery`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -266,7 +260,19 @@ pub fn security_files(dir: Option<&std::path::Path>) -> Result<Option<transport:
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
     let life = life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id);
-    let agent = start_agent(&args, life)?;
+    let link = args.transport.0;
+    if link == Link::Shm && args.security.is_some() {
+        bail!("--security protects RTPS; it does not apply to --transport {link}");
+    }
+    let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
+    let rtps = RtpsConfig {
+        domain_id: args.domain,
+        topic_prefix: args.topic_prefix.clone(),
+        updates: args.updates.into(),
+        security: security_files(args.security.as_deref())?,
+        ..RtpsConfig::default()
+    };
+    let agent = link.start(config, rtps, args.faults).with_context(|| format!("starting the agent on {link}"))?;
     let stop = Arc::new(AtomicBool::new(false));
     let work = start_work(&args, &agent, &stop)?;
     {
@@ -288,35 +294,6 @@ pub fn run(args: AgentArgs) -> Result<()> {
         dump_graph(&agent, path)?;
     }
     Ok(())
-}
-
-/// Starts the agent of `cortex agent` on the transport `--transport` asks for.
-fn start_agent(args: &AgentArgs, life: Option<PathBuf>) -> Result<Arc<Agent<AgentTransport>>> {
-    let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
-    if args.transport == TransportArg::Shm {
-        if args.security.is_some() {
-            bail!("--security protects RTPS; it does not apply to --transport shm");
-        }
-        let prefix = format!("cortex/d{}/{}", args.domain, args.topic_prefix);
-        return agent::shm::start(config, &prefix, &ShmSettings::default(), args.faults)
-            .context("opening shared memory");
-    }
-    let security = security_files(args.security.as_deref())?;
-    let lanes = args.transport == TransportArg::Auto && security.is_none();
-    let rtps = RtpsConfig {
-        domain_id: args.domain,
-        topic_prefix: args.topic_prefix.clone(),
-        updates: args.updates.into(),
-        security,
-        ..RtpsConfig::default()
-    };
-    let faults = args.faults;
-    let agent = if lanes {
-        agent::rtps::start_hybrid(config, rtps, &ShmSettings::default(), faults)
-    } else {
-        agent::rtps::start(config, rtps, faults)
-    };
-    agent.context("joining the DDS domain")
 }
 
 /// Writes the agent's graph as CORTEX JSON to `path` (`--dump-json`).

@@ -2,8 +2,10 @@
 //! attribute between two agent processes and, in the same run, raw byte samples between two processes over the
 //! same `rustdds` transport with no agent on top (the transport's limit); `join` times a new agent process
 //! receiving and rebuilding a graph of N nodes; `fanout` (hidden, for issues 5 and 7) sends large samples from one
-//! writer to N reader processes and counts the bytes on the wire against N, with multicast on and off. The helper
-//! processes are this binary's hidden `bench echo`, `bench join-child` and `bench fanout-reader` subcommands.
+//! writer to N reader processes and counts the bytes on the wire against N, with multicast on and off; `payload`
+//! (`bench/payload.rs`) sends payloads of several sizes from one writer to N receiver processes by every path —
+//! agents over each transport, raw iceoryx2, memcpy — in one run (issue 20). The helper processes are this binary's
+//! hidden `bench echo`, `bench join-child`, `bench fanout-reader` and `bench payload-receiver` subcommands.
 //!
 //! The measurements are `measure::bench` functions that return their figures; this command parses arguments,
 //! decides where the measurement runs, and prints. `rtt` and `fanout` re-run themselves in a fresh network
@@ -12,6 +14,7 @@
 //! read at phase boundaries (discovery, then steady state). Otherwise they print the transport's estimate only and
 //! say why. Figures are measurements, never test assertions.
 
+mod payload;
 mod print;
 
 use std::path::PathBuf;
@@ -57,6 +60,13 @@ pub enum BenchCommand {
     FanoutReader(FanoutReaderArgs),
     /// Anti-entropy and data traffic against the number of agents, in the seeded simulator (no network).
     Scaling(ScalingArgs),
+    /// Payloads of 16 B to 4 MiB from one writer to N receiver processes by every path (agents over RTPS, agents
+    /// over shared memory, raw iceoryx2, memcpy) in one run: one-way latency, CPU per receiver, loopback bytes, and
+    /// each agent figure over raw iceoryx2's.
+    Payload(payload::PayloadArgs),
+    /// Helper process: one receiver of `bench payload`.
+    #[command(hide = true)]
+    PayloadReceiver(payload::PayloadReceiverArgs),
 }
 
 /// Arguments of `cortex bench scaling`.
@@ -288,6 +298,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Fanout(args) => run_fanout(args),
         BenchCommand::FanoutReader(args) => fanout::reader(args.domain, &args.prefix, args.multicast.into()),
         BenchCommand::Scaling(args) => run_scaling(args),
+        BenchCommand::Payload(args) => payload::run(args),
+        BenchCommand::PayloadReceiver(args) => payload::receiver(args),
     }
 }
 

@@ -57,6 +57,7 @@ pub mod core;
 pub mod envelope;
 pub mod graph_id;
 pub mod life;
+pub mod link;
 pub mod mutants;
 pub mod rtps;
 pub mod shm;
@@ -66,6 +67,7 @@ pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, Chang
 pub use calls::{CallError, CallReplier, CallServer, PendingCall};
 pub use envelope::CallFault;
 pub use graph_id::GraphId;
+pub use link::Link;
 pub use status::Control;
 
 /// A CORTEX agent id (12 bits: 0..4096).

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context as _;
 use replay::Rate;
 
+use crate::bench::{self, Counting};
 use crate::provenance::{DatasetChecksum, Provenance};
 use crate::results::{FaultRun, PartitionResult, Results, RunResult};
 use crate::spec::{Link, LogSpec, PartitionConfig, RunConfig};
@@ -56,6 +57,9 @@ pub fn run_set(
     for name in names.chain([&set.payload.transport]) {
         link(name, set.rtps_domain)?;
     }
+    if let Some(experiment) = &set.payload_paths {
+        experiment.validate()?;
+    }
     let provenance = provenance_of(set, root)?;
     let base = RunConfig { receiver_program: receiver_program.map(Path::to_path_buf), ..RunConfig::default() };
     let replay = replay_sweep(set, root, &base, progress)?;
@@ -83,6 +87,19 @@ pub fn run_set(
         Some(experiment) => Some(scaling::run(experiment, progress).context("control traffic against agents")?),
         None => None,
     };
+    let payload_paths = match &set.payload_paths {
+        Some(experiment) => {
+            let program = receiver_program.context("the payload paths need the cortex binary for their receivers")?;
+            let counting = match crate::netns::inside() {
+                Some(_) => Counting::Socket,
+                None => Counting::EstimateOnly("not in a fresh network namespace".into()),
+            };
+            let result = bench::payload::run(experiment, set.rtps_domain, &counting, program, progress)
+                .context("payload paths")?;
+            Some(result)
+        }
+        None => None,
+    };
     Ok(Results {
         provenance,
         experiment: experiment.to_owned(),
@@ -95,6 +112,7 @@ pub fn run_set(
         timeline,
         roles,
         scaling,
+        payload_paths,
         seconds: started.elapsed().as_secs_f64(),
     })
 }

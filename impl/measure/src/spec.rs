@@ -3,7 +3,8 @@
 //!
 //! An experiment file names a `quick` and a `full` [`ExperimentSet`]: the logs to replay (each with its rate and
 //! loops), the numbers of agents and the seeds of the replay sweep, a payload-size sweep of synthetic writes,
-//! fault-injection variants, the partition experiment, and the optional scheduler timeline and detector roles.
+//! fault-injection variants, the partition experiment, and the optional scheduler timeline, detector roles, control
+//! traffic and payload paths (`paths.rs`: [`PayloadPathsExperiment`], also what `cortex bench payload` takes).
 //! Relative paths are resolved against the repository root, the parent of the directory that holds the file
 //! (`experiments/..`). [`RunConfig`] and [`PartitionConfig`] are what one run of [`crate::run`] or
 //! [`crate::partition`] takes.
@@ -15,6 +16,11 @@ use anyhow::Context as _;
 use bica::core::SchedulerConfig;
 use serde::{Deserialize, Serialize};
 use transport::fault::FaultConfig;
+
+mod paths;
+pub use paths::{
+    MAX_PAYLOAD_PATH_BYTES, MAX_PAYLOAD_PATH_COUNT, MAX_PAYLOAD_PATH_RECEIVERS, PayloadPath, PayloadPathsExperiment,
+};
 
 /// An experiment file.
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -196,6 +202,10 @@ pub struct ExperimentSet {
     /// Control traffic against the number of agents in the seeded simulator ([`crate::scaling`]); optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scaling: Option<ScalingExperiment>,
+    /// Payloads from one writer to receiver processes by every path, beside the machine's limit
+    /// ([`crate::bench::payload`]); optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub payload_paths: Option<PayloadPathsExperiment>,
 }
 
 impl ExperimentSet {
@@ -207,7 +217,8 @@ impl ExperimentSet {
             + self.partition.repetitions as usize * self.partition.transports.len()
             + usize::from(self.timeline.is_some())
             + usize::from(self.roles.is_some())
-            + self.scaling.as_ref().map_or(0, |s| s.agents.len())) as u64
+            + self.scaling.as_ref().map_or(0, |s| s.agents.len())
+            + self.payload_paths.as_ref().map_or(0, PayloadPathsExperiment::cells)) as u64
     }
 }
 

@@ -15,6 +15,16 @@ pub fn ms_from_ns(ns: u64) -> f64 {
     ns as f64 / 1e6
 }
 
+/// Nanoseconds as fractional microseconds: `us_from_ns(1_500) == 1.5`.
+pub fn us_from_ns(ns: u64) -> f64 {
+    ns as f64 / 1e3
+}
+
+/// A mean (or any fractional count) of nanoseconds as fractional microseconds.
+pub fn us_from_ns_f64(ns: f64) -> f64 {
+    ns / 1e3
+}
+
 /// A mean (or any fractional count) of nanoseconds as fractional milliseconds.
 pub fn ms_from_ns_f64(ns: f64) -> f64 {
     ns / 1e6
@@ -58,6 +68,8 @@ mod tests {
     #[test]
     fn conversions_scale_by_their_unit() {
         assert_eq!(ms_from_ns(2_000_000), 2.0);
+        assert_eq!(us_from_ns(2_500), 2.5);
+        assert_eq!(us_from_ns_f64(1.5e3), 1.5);
         assert_eq!(s_from_ns(3_000_000_000), 3.0);
         assert_eq!(ms_from_ns_f64(1.5e6), 1.5);
         assert_eq!(s_from_ms(2_500), 2.5);

@@ -1,4 +1,4 @@
-//! What the operating system says a run cost: CPU time of a thread or of the process, peak resident memory, and
+//! What the operating system says a run cost: CPU time of a thread, of the process or of another process, peak resident memory, and
 //! the loopback interface's transmitted bytes. Linux `/proc` and `getrusage`; `None` where unreadable.
 
 /// CPU time of the calling thread in nanoseconds, from `/proc/thread-self/schedstat` (Linux).
@@ -18,6 +18,20 @@ pub fn process_cpu_ns() -> Option<u64> {
     }
     let ns = |t: libc::timeval| (t.tv_sec as u64) * 1_000_000_000 + (t.tv_usec as u64) * 1_000;
     Some(ns(usage.ru_utime) + ns(usage.ru_stime))
+}
+
+/// CPU time of every live thread of process `pid` in nanoseconds: the sum of `/proc/PID/task/*/schedstat` (Linux;
+/// a thread that has exited no longer counts). `None` when the process is gone or nothing could be read.
+pub fn process_cpu_ns_of(pid: u32) -> Option<u64> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    let mut total = None;
+    for task in tasks.flatten() {
+        let Ok(text) = std::fs::read_to_string(task.path().join("schedstat")) else { continue };
+        if let Some(ns) = text.split_whitespace().next().and_then(|field| field.parse::<u64>().ok()) {
+            total = Some(total.unwrap_or(0) + ns);
+        }
+    }
+    total
 }
 
 /// Transmitted bytes of the loopback interface of this process's network namespace (Linux; see

@@ -2,7 +2,8 @@
 //! (no run, no clock) must stay byte for byte what the report wrote before its sections were split into files.
 //! The golden files were written by the code before the split (commit 7f61e71's `report.rs`); regenerate them with
 //! `UPDATE_GOLDEN=1` only for a change that means to alter the report, and say so in the commit. (Changed since:
-//! the "Control traffic against number of agents" section and `results.json`'s `scaling`, added after the split.)
+//! the "Control traffic against number of agents" section and `results.json`'s `scaling`, added after the split;
+//! the "Same-host payloads against the machine's limit" section and `payload_paths`.)
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -11,10 +12,10 @@ use measure::Provenance;
 use measure::latency::{self, PayloadClass, Percentiles};
 use measure::provenance::{DatasetChecksum, Machine};
 use measure::results::{
-    AgentCost, Bandwidth, FaultRun, KindTraffic, PartitionResult, PhaseSummary, Results, RolesResult, RunResult,
-    ScalingResult, ScalingRow, StepRecord, Timeline, TimelineResult,
+    AgentCost, Bandwidth, FaultRun, KindTraffic, PartitionResult, PayloadCell, PayloadPathsResult, PhaseSummary,
+    Results, RolesResult, RunResult, ScalingResult, ScalingRow, StepRecord, Timeline, TimelineResult,
 };
-use measure::spec::{ExperimentSet, ScalingExperiment, TimelineExperiment};
+use measure::spec::{ExperimentSet, PayloadPath, PayloadPathsExperiment, ScalingExperiment, TimelineExperiment};
 
 const SET: &str = r#"
 agents = [2, 4]
@@ -150,6 +151,42 @@ fn scaling() -> ScalingResult {
     }
 }
 
+/// The payload paths for one size to 1 receiver, every path, numbers made by hand.
+fn payload_paths() -> PayloadPathsResult {
+    let experiment = PayloadPathsExperiment {
+        sizes: vec![4 << 20],
+        receivers: vec![1],
+        paths: PayloadPath::all(),
+        count: 20,
+        rate_hz: 20.0,
+    };
+    let cell = |path: PayloadPath, p50_ns: u64, cpu: Option<f64>, loopback: Option<f64>| PayloadCell {
+        path,
+        size_bytes: 4 << 20,
+        receivers: u32::from(path.has_receivers()),
+        expected: 20,
+        latency: Percentiles {
+            count: 20,
+            p50_ns,
+            p90_ns: 2 * p50_ns,
+            p99_ns: 3 * p50_ns,
+            p999_ns: 3 * p50_ns,
+            max_ns: 4 * p50_ns,
+            mean_ns: 1.5 * p50_ns as f64,
+        },
+        cpu_ns_per_sample: cpu,
+        loopback_bytes_per_sample: loopback,
+        to_iceoryx2: None,
+    };
+    let cells = vec![
+        cell(PayloadPath::Agents(agent::Link::Shm), 3_000_000, Some(2_400_000.0), Some(0.0)),
+        cell(PayloadPath::Memcpy, 67_000, None, None),
+        cell(PayloadPath::Agents(agent::Link::Rtps), 8_900_000, Some(5_300_000.0), Some(4_200_207.5)),
+        cell(PayloadPath::Iceoryx2, 290_000, Some(44_000.0), Some(0.0)),
+    ];
+    PayloadPathsResult::new(experiment, true, "0.50 0.40 0.30 1/100 7".into(), cells)
+}
+
 fn timeline() -> TimelineResult {
     let experiment = TimelineExperiment {
         log: "datasets/logs/euroc_v1_01_easy_cam0_1s.mcap".into(),
@@ -276,6 +313,7 @@ fn results() -> Results {
         timeline: Some(timeline()),
         roles: Some(serde_json::from_str::<RolesResult>(ROLES).unwrap()),
         scaling: Some(scaling()),
+        payload_paths: Some(payload_paths()),
         seconds: 12.5,
     }
 }

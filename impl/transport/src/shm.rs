@@ -3,8 +3,8 @@
 //!
 //! This module is the same-host path: [`ShmLane`] moves one channel's samples between the endpoints of one host
 //! through shared memory, and [`ShmTransport`] makes the three channels a [`crate::Transport`] (used by
-//! `cortex agent --transport shm`). The hybrid with RTPS (discovery, other hosts) is not written yet;
-//! `ARCHITECTURE.md` (section "Same-host shared memory") gives the design it follows.
+//! `cortex agent --transport shm`, and the same-host half of [`crate::hybrid`], the default); [`limit`] is the raw
+//! iceoryx2 limit they are measured against (`cortex bench payload`).
 //!
 //! Shape of a lane sample: the sample's bytes as the transport was given them, as an iceoryx2 `[u8]` payload, with
 //! the sender's [`EndpointId`] in the sample's user header (`[u64; 2]`). iceoryx2 records the payload and header
@@ -23,6 +23,7 @@ use iceoryx2::service::ipc_threadsafe;
 
 use crate::EndpointId;
 
+pub mod limit;
 mod transport;
 pub use transport::ShmTransport;
 

@@ -84,12 +84,7 @@ pub fn run(args: ChaosAgentArgs) -> Result<()> {
     }
     // The default transport, as `cortex agent` runs it: RTPS with same-host shared memory (lanes of this network
     // namespace, so only `cortex chaos --same-host` puts peers on them); with DDS Security, RTPS alone.
-    let agent = if rtps.security.is_some() {
-        agent::rtps::start(config, rtps, None)
-    } else {
-        agent::rtps::start_hybrid(config, rtps, &transport::shm::ShmSettings::default(), None)
-    };
-    let agent = agent.context("joining the DDS domain")?;
+    let agent = agent::Link::Auto.start(config, rtps, None).context("joining the DDS domain")?;
     let out = Arc::new(Mutex::new(std::io::stdout()));
     {
         // Prints until the process ends (its output closed, or the process exits after the input ends).

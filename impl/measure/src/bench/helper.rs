@@ -1,6 +1,6 @@
 //! The helper processes of the benchmarks: the program given to a benchmark (the `cortex` binary) started with one
 //! of the command lines here, which its hidden `bench` subcommands implement by calling the helper bodies
-//! ([`super::rtt::echo`], [`super::join::child`], [`super::fanout::reader`]). A helper is killed when dropped.
+//! ([`super::rtt::echo`], [`super::join::child`], [`super::fanout::reader`], the receivers of [`super::payload`]). A helper is killed when dropped.
 
 use std::path::Path;
 use std::process::{Child, ChildStdout, Command, Stdio};
@@ -28,6 +28,25 @@ impl Helper {
             .spawn()
             .with_context(|| format!("starting a helper process ({})", program.display()))?;
         Ok(Helper(child))
+    }
+
+    /// The helper's process id.
+    pub fn pid(&self) -> u32 {
+        self.0.id()
+    }
+
+    /// Waits up to `timeout` for the helper to exit by itself; says whether it did (if not, dropping it kills it).
+    pub fn exited_within(&mut self, timeout: std::time::Duration) -> bool {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            match self.0.try_wait() {
+                Ok(Some(_)) => return true,
+                Ok(None) if std::time::Instant::now() < deadline => {
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                }
+                Ok(None) | Err(_) => return false,
+            }
+        }
     }
 
     /// The helper's standard output (once).
@@ -92,6 +111,16 @@ pub fn fanout_reader_args(domain: u16, prefix: &str, multicast: Multicast) -> Ve
         .collect()
 }
 
+/// `bench payload-receiver`: receiver `index` of a payload path (`iceoryx2`, or agents over a link by its name)
+/// on services or topics of `prefix`; see [`super::payload`].
+pub fn payload_receiver_args(path: &str, domain: u16, prefix: &str, index: u32) -> Vec<String> {
+    ["bench", "payload-receiver", "--path", path, "--domain", &domain.to_string(), "--prefix", prefix, "--index"]
+        .map(String::from)
+        .into_iter()
+        .chain([index.to_string()])
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -110,6 +139,10 @@ mod tests {
         assert_eq!(
             fanout_reader_args(2, "f", Multicast::On).join(" "),
             "bench fanout-reader --domain 2 --prefix f --multicast on"
+        );
+        assert_eq!(
+            payload_receiver_args("shm", 4, "p", 7).join(" "),
+            "bench payload-receiver --path shm --domain 4 --prefix p --index 7"
         );
     }
 }

@@ -2,11 +2,13 @@
 //! [`rtt::run`] ping-pongs one attribute between two agent processes and, in the same run, raw byte samples between
 //! two processes over the same `rustdds` transport with no agent on top (the transport's limit); [`join::run`]
 //! times a new agent process receiving and rebuilding a graph of N nodes; [`fanout::run`] sends large samples from
-//! one writer to N reader processes and counts the bytes on the wire against N, with multicast on and off.
+//! one writer to N reader processes and counts the bytes on the wire against N, with multicast on and off;
+//! [`payload::run`] sends payloads of several sizes from one writer to N receiver processes by every path (agents
+//! over each link, raw iceoryx2, memcpy) and gives each agent figure as a ratio to raw iceoryx2's.
 //!
 //! The other side of each measurement is a separate process, because that is what is measured: the program given
 //! to each function (the `cortex` binary) is started with the helper command lines of [`helper`], and its helper
-//! subcommands call [`rtt::echo`], [`join::child`] and [`fanout::reader`]; the join helper answers with a typed
+//! subcommands call [`rtt::echo`], [`join::child`], [`fanout::reader`] and [`payload::receiver`]; the join helper answers with a typed
 //! [`join::JoinChildReport`] on its standard output. Where the caller runs in a fresh network namespace
 //! ([`crate::netns`]), [`Counting::Socket`] reads its loopback counters at phase boundaries (discovery, then the
 //! steady state), so the figures include IP, UDP and RTPS, acknowledgements, heartbeats and discovery. Figures are
@@ -15,6 +17,7 @@
 pub mod fanout;
 pub mod helper;
 pub mod join;
+pub mod payload;
 pub mod rtt;
 
 use anyhow::Context as _;

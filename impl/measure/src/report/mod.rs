@@ -17,6 +17,7 @@ mod format;
 mod latency;
 mod not_measured;
 mod payload;
+mod payload_paths;
 mod provenance;
 mod recordings;
 mod roles;
@@ -59,6 +60,7 @@ pub const SECTIONS: &[Section] = &[
     claims::SECTION,
     latency::SECTION,
     payload::SECTION,
+    payload_paths::SECTION,
     bandwidth::SECTION,
     convergence::SECTION,
     cpu::SECTION,

@@ -11,10 +11,15 @@ pub(super) const SECTION: Section = Section { heading: "## Not measured yet", fi
 fn write(md: &mut String, r: &Results, _: &Context<'_>) {
     let _ = writeln!(
         md,
-        "- The full agent layer (`agent::Agent`: envelope, anti-entropy, lock) on the measured path: receivers apply \
-         the source's deltas to a bare `dsr::Replica`.\n\
+        "- The full agent layer (`agent::Agent`: envelope, anti-entropy, lock) on the measured path of the replay \
+         and payload sweeps: receivers apply the source's deltas to a bare `dsr::Replica`{}.\n\
          - Partitions with agents as separate processes (the partition runs put their agents in one process).\n\
          {}{}",
+        if r.payload_paths.is_some() {
+            " (\"Same-host payloads against the machine's limit\" measures real agents in every receiver process)"
+        } else {
+            ""
+        },
         if r.roles.is_some() {
             ""
         } else {

@@ -3,6 +3,7 @@
 //! anything, and none uses a runner or a consumer.
 
 mod partition;
+mod payload_paths;
 mod roles;
 mod run;
 mod scaling;
@@ -11,6 +12,7 @@ mod timeline;
 use serde::Serialize;
 
 pub use partition::PartitionResult;
+pub use payload_paths::{PAYLOAD_PATHS_LATENCY, PathRatios, PayloadCell, PayloadPathsResult};
 pub use roles::{AgentRow, ComponentRow, RolesResult};
 pub use run::{AgentCost, Bandwidth, MAX_TIMELINE_WRITES, RunResult, TimelineWrite, WriteTimeline};
 pub use scaling::{CONTROL_KINDS, DATA_KINDS, KindTraffic, REPAIR_KINDS, ScalingRates, ScalingResult, ScalingRow};
@@ -58,6 +60,10 @@ pub struct Results {
     /// without a bump: a new field, absent when the set has none).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scaling: Option<ScalingResult>,
+    /// Payloads to receiver processes by every path beside the machine's limit, if the set has a `payload_paths`
+    /// section (added to schema version 2 without a bump, like `scaling`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub payload_paths: Option<PayloadPathsResult>,
     /// Wall-clock seconds of the whole set.
     pub seconds: f64,
 }
