@@ -100,12 +100,22 @@ impl VisibleGraph {
             hasher.update(&(attrs.len() as u64).to_le_bytes());
             for (name, attr) in attrs {
                 text(hasher, name);
-                attr.value.hash_into(hasher);
                 hasher.update(&(attr.concurrent.len() as u64).to_le_bytes());
                 for (stamp, replica, value) in &attr.concurrent {
                     hasher.update(&stamp.0.to_le_bytes());
                     hasher.update(&replica.0.to_le_bytes());
                     value.hash_into(hasher);
+                }
+                // The winner is one of the concurrent values: its place among them, not its bytes again (a camera
+                // frame is hashed once, not twice). A winner outside them (no replica makes one) is hashed whole.
+                match attr.concurrent.iter().position(|(_, _, value)| value.same_as(&attr.value)) {
+                    Some(at) => {
+                        hasher.update(&(at as u64).to_le_bytes());
+                    }
+                    None => {
+                        hasher.update(&u64::MAX.to_le_bytes());
+                        attr.value.hash_into(hasher);
+                    }
                 }
             }
         };
