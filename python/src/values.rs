@@ -9,8 +9,8 @@
 //! with in this process, as in pydsr.
 //!
 //! Copies: a C-contiguous numpy array of the attribute's own element type, or `bytes`, becomes an attribute in one
-//! `memcpy` into the attribute's own buffer (`bytes::Bytes`, `Arc<[f32]>`, `Arc<[u64]>`); an attribute comes back as
-//! a new numpy array in one `memcpy` out of it. No per-element conversion in either direction on that path (a
+//! `memcpy` into the attribute's own buffer (`bytes::Bytes`, `dsr::Numbers<f32>`, `dsr::Numbers<u64>`); an
+//! attribute comes back as a new numpy array in one `memcpy` out of it. No per-element conversion in either direction on that path (a
 //! non-contiguous view is gathered element by element, a float64 array narrowed element by element, and a Python
 //! list, as in pydsr, is converted per element).
 

@@ -45,11 +45,10 @@ use crate::value::{AttrType, Numbers, ValueType};
 /// ```
 /// while the right one does:
 /// ```
-/// use std::sync::Arc;
-/// use dsr::{NewNode, Replica, ReplicaId, attrs};
+/// use dsr::{NewNode, Numbers, Replica, ReplicaId, attrs};
 /// let mut replica = Replica::new(ReplicaId(1));
 /// let (id, _) = replica.insert_node(0, NewNode::new("world", "world")).unwrap();
-/// let translation: Numbers<f32> = Arc::from([0.0f32, 0.0, 100.0]);
+/// let translation: Numbers<f32> = Numbers::from([0.0f32, 0.0, 100.0]);
 /// replica.set_attr(1, id, attrs::RT_TRANSLATION, translation).unwrap();
 /// ```
 pub struct AttrKey<T> {
