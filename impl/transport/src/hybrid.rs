@@ -10,9 +10,10 @@
 //!   its RTPS endpoint id and the GUID prefix of its RTPS readers ([`peers::Hello`]). A hello heard through a lane
 //!   proves the peer shares the lane; a peer silent for [`peers::PEER_EXPIRY_NS`] is forgotten.
 //! - **Sending, no double send.** A sample up to the lanes' `max_sample_bytes` goes through shared memory (written
-//!   once, whatever the number of same-host readers) when some peer of this host has said hello; it goes by RTPS as well only if a matched RTPS reader of its
-//!   channel is not a known same-host peer's (another host, a process without lanes, a peer not heard yet). So
-//!   with every peer on this host nothing of the graph's data crosses the loopback; only RTPS's discovery does.
+//!   once, whatever the number of same-host readers) when some peer of this host has said hello; it goes by RTPS
+//!   as well only if a matched RTPS reader of its channel is not a known same-host peer's (another host, a process
+//!   without lanes, a peer not heard yet). So with every peer on this host nothing of the graph's data crosses the
+//!   loopback; only RTPS's discovery does.
 //!   Larger samples, and any sample when the lane fails, go by RTPS alone. A sample for one peer
 //!   ([`Transport::publish_to`]) goes by the lane when that peer is on this host, else by a directed RTPS write.
 //! - **Receiving, no double delivery.** An RTPS sample from a same-host peer that fits the lanes is dropped: the
