@@ -192,9 +192,8 @@ impl HybridTransport {
 
     /// Whether some matched RTPS reader of `channel` is not a known same-host peer's.
     fn rtps_needed(&self, channel: Channel) -> bool {
-        let readers = self.rtps.matched_reader_prefixes(channel);
         let peers = self.shared.peers();
-        readers.iter().any(|prefix| !peers.has_reader(prefix))
+        self.rtps.matched_readers(channel, |prefix| !peers.has_reader(prefix)) > 0
     }
 
     /// Publishes `bytes` through the lane; `false` (after a warning) if the lane failed, so the caller uses RTPS.

@@ -253,11 +253,12 @@ impl RtpsTransport {
         self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()).1
     }
 
-    /// The GUID prefixes of the remote readers `channel`'s writers have matched now (the best-effort updates
-    /// writer's among [`Channel::Updates`]'), as discovery reported them; at most a few thousand are remembered.
-    pub fn matched_reader_prefixes(&self, channel: Channel) -> Vec<[u8; 12]> {
+    /// How many of the remote readers `channel`'s writers have matched now (the best-effort updates writer's among
+    /// [`Channel::Updates`]'), as discovery reported them, have a GUID prefix that `which` accepts; at most a few
+    /// thousand are remembered. Nothing is allocated: a hybrid transport asks on every publish.
+    pub fn matched_readers(&self, channel: Channel, which: impl Fn(&[u8; 12]) -> bool) -> usize {
         let readers = self.discovery.readers.lock().unwrap_or_else(|p| p.into_inner());
-        readers[channel.index()].iter().map(|guid| discovery::prefix_of(*guid)).collect()
+        readers[channel.index()].iter().filter(|guid| which(&discovery::prefix_of(**guid))).count()
     }
 }
 
