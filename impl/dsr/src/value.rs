@@ -118,7 +118,7 @@ pub enum Value {
     /// A 32-bit float.
     F32(f32),
     /// A vector of 32-bit floats (laser distances, point coordinates, CORTEX's `rt_translation`).
-    VecF32(#[serde(with = "f32_slice")] Numbers<f32>),
+    VecF32(#[serde(with = "numbers_wire")] Numbers<f32>),
     /// A boolean.
     Bool(bool),
     /// A byte vector (camera images, opaque payloads).
@@ -130,7 +130,7 @@ pub enum Value {
     /// A 64-bit float.
     F64(f64),
     /// A vector of 64-bit unsigned integers.
-    VecU64(#[serde(with = "u64_slice")] Numbers<u64>),
+    VecU64(#[serde(with = "numbers_wire")] Numbers<u64>),
     /// Two 32-bit floats.
     F32x2([f32; 2]),
     /// Three 32-bit floats.
@@ -426,30 +426,22 @@ mod arc_str {
     }
 }
 
-/// Encodes `Numbers<f32>` as one byte string of little-endian floats, so decoding fills the final buffer in one copy,
-/// or none (a view of the shared buffer being decoded, see [`Numbers`]).
-mod f32_slice {
+/// Encodes a `Numbers<f32>` or `Numbers<u64>` as one byte string of little-endian values, so decoding fills the
+/// final buffer in one copy, or none (a view of the shared buffer being decoded, see [`Numbers`]).
+mod numbers_wire {
     use super::*;
 
-    pub fn serialize<S: serde::Serializer>(values: &Numbers<f32>, serializer: S) -> Result<S::Ok, S::Error> {
+    pub fn serialize<T: WireNumber, S: serde::Serializer>(
+        values: &Numbers<T>,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
         super::serialize_numbers(values, serializer)
     }
 
-    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Numbers<f32>, D::Error> {
-        deserializer.deserialize_bytes(NumbersVisitor::<f32>(std::marker::PhantomData))
-    }
-}
-
-/// Encodes `Numbers<u64>` as one byte string of little-endian integers (as `f32_slice`).
-mod u64_slice {
-    use super::*;
-
-    pub fn serialize<S: serde::Serializer>(values: &Numbers<u64>, serializer: S) -> Result<S::Ok, S::Error> {
-        super::serialize_numbers(values, serializer)
-    }
-
-    pub fn deserialize<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Numbers<u64>, D::Error> {
-        deserializer.deserialize_bytes(NumbersVisitor::<u64>(std::marker::PhantomData))
+    pub fn deserialize<'de, T: WireNumber, D: serde::Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Numbers<T>, D::Error> {
+        deserializer.deserialize_bytes(NumbersVisitor::<T>(std::marker::PhantomData))
     }
 }
 
@@ -460,25 +452,22 @@ trait WireNumber: bytemuck::Pod {
     fn put_le(self, out: &mut Vec<u8>);
 }
 
-impl WireNumber for f32 {
-    const NAME: &'static str = "f32";
-    fn from_le(bytes: &[u8]) -> Self {
-        f32::from_le_bytes(bytes.try_into().unwrap_or_default())
-    }
-    fn put_le(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes());
-    }
+macro_rules! wire_number {
+    ($t:ty) => {
+        impl WireNumber for $t {
+            const NAME: &'static str = stringify!($t);
+            fn from_le(bytes: &[u8]) -> Self {
+                <$t>::from_le_bytes(bytes.try_into().unwrap_or_default())
+            }
+            fn put_le(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes());
+            }
+        }
+    };
 }
 
-impl WireNumber for u64 {
-    const NAME: &'static str = "u64";
-    fn from_le(bytes: &[u8]) -> Self {
-        u64::from_le_bytes(bytes.try_into().unwrap_or_default())
-    }
-    fn put_le(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes());
-    }
-}
+wire_number!(f32);
+wire_number!(u64);
 
 /// One byte string of little-endian values: the values' own bytes on a little-endian host, no conversion.
 fn serialize_numbers<T: WireNumber, S: serde::Serializer>(values: &[T], serializer: S) -> Result<S::Ok, S::Error> {
