@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod commands;
+mod memory;
 
 /// Tools for the DSR_d working memory: CORTEX graphs now; model checks, agents, benchmarks, replays and reports
 /// as they arrive.
@@ -77,6 +78,9 @@ fn init_logging() {
 }
 
 fn main() -> ExitCode {
+    if !memory::keep_freed_memory() {
+        eprintln!("note: the allocator keeps its defaults: frame-sized buffers are mapped afresh (see memory.rs)");
+    }
     init_logging();
     let cli = Cli::parse();
     let outcome = match cli.command {

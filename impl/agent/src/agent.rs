@@ -250,8 +250,16 @@ impl<T: Transport + 'static> Agent<T> {
                 while !inner.stop.load(Ordering::Relaxed) {
                     if let Ok(reply) = inner.service.outbox_rx.recv_timeout(tick) {
                         let graph = inner.lock().core.graph();
-                        inner
-                            .send(vec![Send { channel: Channel::Calls, message: reply, dest: Dest::All, graph }], None);
+                        inner.send(
+                            vec![Send {
+                                channel: Channel::Calls,
+                                message: reply,
+                                dest: Dest::All,
+                                graph,
+                                sample: None,
+                            }],
+                            None,
+                        );
                     }
                 }
             })
@@ -288,7 +296,7 @@ impl<T: Transport + 'static> Agent<T> {
             .service
             .outbox_rx
             .try_iter()
-            .map(|message| Send { channel: Channel::Calls, message, dest: Dest::All, graph })
+            .map(|message| Send { channel: Channel::Calls, message, dest: Dest::All, graph, sample: None })
             .collect();
         let n = replies.len();
         self.inner.send(replies, None);

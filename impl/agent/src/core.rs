@@ -96,6 +96,9 @@ pub struct AgentCore {
     next_announce_ns: u64,
     /// The latest local write not yet followed by an announce.
     unannounced_write_ns: Option<u64>,
+    /// The operations joined at the last announce: an announce carries the digest only when nothing was joined
+    /// since (a still graph), so a stream of frames is not hashed at every announce.
+    announced: Option<CausalContext>,
     /// The outstanding missing-request: the peer asked and when.
     pending_ask: Option<(AgentId, u64)>,
     peers: BTreeSet<AgentId>,
@@ -123,6 +126,7 @@ impl AgentCore {
             collision: None,
             next_announce_ns: now_ns,
             unannounced_write_ns: None,
+            announced: None,
             pending_ask: None,
             peers: BTreeSet::new(),
             answered: BTreeMap::new(),
@@ -307,15 +311,18 @@ impl AgentCore {
         let quiet_after_writes =
             quiet > 0 && self.unannounced_write_ns.is_some_and(|at| now_ns.saturating_sub(at) >= quiet);
         if (now_ns >= self.next_announce_ns || quiet_after_writes)
-            && let Some(digest) = self.digest()
             && let Some(replica) = &self.replica
         {
+            let (replica_id, applied) = (replica.id(), replica.applied().clone());
+            let still = self.announced.as_ref() == Some(&applied);
+            let digest = if still { self.digest().map(|d| d.0) } else { None };
+            self.announced = Some(applied.clone());
             let announce = Message::Announce {
                 from: self.config.id,
                 nonce: self.life.nonce,
-                replica: replica.id(),
-                applied: replica.applied().clone(),
-                digest: digest.0,
+                replica: replica_id,
+                applied,
+                digest,
             };
             out.send(Channel::Sync, announce, Dest::All);
             self.next_announce_ns = if self.config.plant.is(ProtocolMutant::AnnounceTimerLost) {

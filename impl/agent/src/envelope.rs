@@ -66,9 +66,11 @@ pub enum Message {
         replica: ReplicaId,
         /// The operations the announcer has joined (`dsr::Replica::applied`): what anti-entropy compares.
         applied: CausalContext,
-        /// Digest of the announcer's visible graph. Equal applied sets with different digests would be a bug in the
-        /// replica; the receiver logs it as an error and repairs with whole states.
-        digest: [u8; 32],
+        /// Digest of the announcer's visible graph, when its graph is still: it joined nothing since its previous
+        /// announce (a digest hashes every value, a camera frame included, and a graph still changing would be
+        /// compared with nothing). Equal applied sets with different digests would be a bug in the replica; the
+        /// receiver logs it as an error and repairs with whole states.
+        digest: Option<[u8; 32]>,
     },
     /// "Send me what I lack": sent to a peer whose announce showed dots the sender has not seen.
     MissingRequest {
@@ -309,6 +311,18 @@ impl Message {
         }
     }
 
+    /// The sample of a local delta, encoded once: the envelope's fields, then the delta straight after them in the
+    /// same buffer (no second copy of a camera frame). Returns the sample and the message it holds, whose delta is a
+    /// slice of the sample; `message.encode(Some(graph))` gives the same bytes.
+    pub fn delta_sample(graph: GraphId, from: AgentId, delta: &dsr::Delta) -> (Bytes, Message) {
+        let mut out = put(header(K_DELTA, Some(graph)), &from.0);
+        let fields = out.len();
+        delta.encode_into(&mut out);
+        let sample = Bytes::from(out);
+        let message = Message::Delta { from, delta: sample.slice(fields..) };
+        (sample, message)
+    }
+
     /// Encodes the message as a sample of graph `graph` (`None`: a joiner that names no graph; only for a graph
     /// request).
     pub fn encode(&self, graph: Option<GraphId>) -> Bytes {
@@ -400,8 +414,10 @@ impl Message {
                 Message::Delta { from: AgentId(from), delta: tail(rest) }
             }
             K_ANNOUNCE => {
-                let ((from, nonce, replica, context, digest), rest): ((u32, u64, u32, WireContext, [u8; 32]), _) =
-                    postcard::take_from_bytes(body).map_err(take)?;
+                let ((from, nonce, replica, context, digest), rest): (
+                    (u32, u64, u32, WireContext, Option<[u8; 32]>),
+                    _,
+                ) = postcard::take_from_bytes(body).map_err(take)?;
                 whole(rest)?;
                 if replica == 0 {
                     return Err(malformed("replica id 0".into()));
@@ -489,7 +505,7 @@ mod tests {
         let (from, to) = (AgentId(3), AgentId(4));
         vec![
             Message::Delta { from, delta: Bytes::from(d2.encode()) },
-            Message::Announce { from, nonce: 99, replica: ReplicaId(7), applied: ctx.clone(), digest: [3; 32] },
+            Message::Announce { from, nonce: 99, replica: ReplicaId(7), applied: ctx.clone(), digest: Some([3; 32]) },
             Message::MissingRequest { from, to, applied: ctx, full: true },
             Message::Deltas { from, to, deltas: vec![Bytes::from(d1.encode()), Bytes::from(d2.encode())] },
             Message::Snapshot { from, to, snapshot: Bytes::from(replica.snapshot().encode()) },
@@ -515,6 +531,21 @@ mod tests {
         }
         let update = samples()[0].encode(G);
         assert!(update.len() < 68, "a one-attribute update is {} bytes", update.len());
+    }
+
+    #[test]
+    fn a_delta_encoded_straight_into_its_sample_is_the_same_sample_and_its_message_a_view_of_it() {
+        let mut replica = dsr::Replica::new(ReplicaId(7));
+        let (id, _) = replica.insert_node(5, dsr::NewNode::new("camera", "cam")).unwrap();
+        let frame = Bytes::from(vec![0xA5; 64 << 10]);
+        let delta = replica.set_attr(6, id, dsr::attrs::CAM_RGB, frame).unwrap();
+        let graph = G.unwrap();
+        let (sample, message) = Message::delta_sample(graph, AgentId(3), &delta);
+        assert_eq!(sample, message.encode(G), "the same bytes as encoding the message");
+        assert_eq!(message, Message::Delta { from: AgentId(3), delta: Bytes::from(delta.encode()) });
+        let Message::Delta { delta: view, .. } = &message else { unreachable!() };
+        let inside = sample.as_ptr_range();
+        assert!(inside.contains(&view.as_ptr()), "the message's delta is a slice of the sample, not a copy");
     }
 
     #[test]

@@ -328,3 +328,49 @@ fn a_life_that_starts_alone_naming_no_graph_creates_one_with_an_id_from_its_nonc
     joiner.tick(6_000_000_000);
     assert_eq!(joiner.graph(), Some(GraphId::from_nonce(77)));
 }
+
+/// The digest an announce in `out` carries: `None` for no announce, `Some(None)` for an announce without one.
+fn announced_digest(out: &Output) -> Option<Option<[u8; 32]>> {
+    out.sends.iter().find_map(|send| match &send.message {
+        Message::Announce { digest, .. } => Some(*digest),
+        _ => None,
+    })
+}
+
+#[test]
+fn an_announce_carries_the_digest_only_when_nothing_was_joined_since_the_previous_announce() {
+    let mut core = announcer(1, 8);
+    let write = |core: &mut AgentCore, now_ns: u64, name: &str| {
+        core.write(now_ns, |r, now| r.insert_node(now, NewNode::new("object", name)).map(|(_, d)| ((), vec![d])))
+            .unwrap();
+    };
+    // Frames keep coming: every announce meets a graph changed since the one before and hashes nothing.
+    let mut now = 100_000_000;
+    for frame in 0..5 {
+        write(&mut core, now - 1, &format!("frame{frame}"));
+        let out = core.tick(now);
+        assert_eq!(announced_digest(&out), Some(None), "announce at {now} ns, after a write");
+        now += 100_000_000;
+    }
+    // The writes stop: the next announce shows the still graph's digest, equal to the replica's own.
+    let out = core.tick(now);
+    let expected = core.replica().map(|r| r.digest().0);
+    assert_eq!(announced_digest(&out), Some(expected), "announce at {now} ns, nothing joined since the last");
+}
+
+#[test]
+fn a_peer_with_the_same_operations_and_another_digest_is_asked_for_a_whole_state_and_a_missing_digest_is_no_mismatch() {
+    let mut a = announcer(1, 8);
+    let applied = a.replica().unwrap().applied().clone();
+    let announce = |digest| Input::Announce {
+        from: AgentId(2),
+        nonce: 2,
+        replica: dsr::ReplicaId(2),
+        applied: applied.clone(),
+        digest,
+    };
+    let quiet = a.handle(1, graph_g(), announce(None));
+    assert!(!quiet.events.iter().any(|e| matches!(e, Event::DigestMismatch { .. })), "{:?}", quiet.events);
+    let other = a.handle(2, graph_g(), announce(Some([9; 32])));
+    assert!(other.events.iter().any(|e| matches!(e, Event::DigestMismatch { peer: AgentId(2) })), "{:?}", other.events);
+}

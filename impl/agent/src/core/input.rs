@@ -28,8 +28,8 @@ pub enum Input {
         replica: ReplicaId,
         /// Its applied operations.
         applied: CausalContext,
-        /// Its digest.
-        digest: [u8; 32],
+        /// Its digest, when its graph is still.
+        digest: Option<[u8; 32]>,
     },
     /// A missing-request addressed to this agent.
     MissingRequest {

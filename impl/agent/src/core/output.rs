@@ -32,12 +32,18 @@ pub struct Send {
     /// The sender's graph, carried in the envelope (`None` only in the graph request of a joiner that names no
     /// graph).
     pub graph: Option<GraphId>,
+    /// The message already in its envelope with `graph`, when it was encoded straight into its sample (a local
+    /// delta, [`Message::delta_sample`]); [`Send::encode`] returns it instead of encoding again.
+    pub sample: Option<Bytes>,
 }
 
 impl Send {
     /// The sample's bytes: the message in its envelope, with the graph id.
     pub fn encode(&self) -> Bytes {
-        self.message.encode(self.graph)
+        match &self.sample {
+            Some(sample) => sample.clone(),
+            None => self.message.encode(self.graph),
+        }
     }
 }
 
@@ -134,12 +140,15 @@ pub struct Output {
 impl Output {
     /// Queues a message; its graph id is stamped by [`Output::stamp`] when the core returns.
     pub(super) fn send(&mut self, channel: Channel, message: Message, dest: Dest) {
-        self.sends.push(Send { channel, message, dest, graph: None });
+        self.sends.push(Send { channel, message, dest, graph: None, sample: None });
     }
 
     /// Stamps every queued message with the sender's graph.
     pub(super) fn stamp(mut self, graph: Option<GraphId>) -> Output {
         for send in &mut self.sends {
+            if send.graph != graph {
+                send.sample = None;
+            }
             send.graph = graph;
         }
         self
@@ -160,16 +169,19 @@ pub struct Written {
 }
 
 impl Written {
-    /// The messages that publish the deltas to every agent (encoding each).
+    /// The messages that publish the deltas to every agent (encoding each once, straight into its sample).
     pub fn sends(&self) -> Vec<Send> {
-        let encode = |delta: &Arc<Delta>| Message::Delta { from: self.from, delta: Bytes::from(delta.encode()) };
         self.deltas
             .iter()
-            .map(|delta| Send {
-                channel: Channel::Updates,
-                message: encode(delta),
-                dest: Dest::All,
-                graph: Some(self.graph),
+            .map(|delta| {
+                let (sample, message) = Message::delta_sample(self.graph, self.from, delta);
+                Send {
+                    channel: Channel::Updates,
+                    message,
+                    dest: Dest::All,
+                    graph: Some(self.graph),
+                    sample: Some(sample),
+                }
             })
             .collect()
     }

@@ -58,7 +58,7 @@ impl AgentCore {
         &mut self,
         from: AgentId,
         applied: &CausalContext,
-        digest: [u8; 32],
+        digest: Option<[u8; 32]>,
         now_ns: u64,
         out: &mut Output,
     ) {
@@ -70,7 +70,10 @@ impl AgentCore {
             return self.ask(from, false, now_ns, out);
         }
         let same_ops = self.replica.as_ref().is_some_and(|r| r.applied() == applied);
-        if same_ops && self.digest().map(|d| d.0) != Some(digest) {
+        if same_ops
+            && let Some(digest) = digest
+            && self.digest().map(|d| d.0) != Some(digest)
+        {
             // The same operations joined, yet another graph: a bug in the replica. Repair with whole states.
             out.events.push(Event::DigestMismatch { peer: from });
             self.ask(from, true, now_ns, out);
