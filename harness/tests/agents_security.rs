@@ -1,15 +1,22 @@
 //! Issue 22, DDS Security, on real `cortex agent` processes with a test PKI made by `cortex security init`: a
 //! secured graph of three agents converges, and a fourth process cannot change it — one with no credentials, one
-//! whose identity another CA signed, one whose permissions only let it subscribe, one whose credentials expired —
-//! while the three agents' digests stay what they were.
+//! whose identity another CA signed, one whose permissions only let it read, one whose credentials expired —
+//! while the three agents' digests stay what they were. A reader (`--readers`: publish on the requests topic
+//! alone) joins a secured graph read-only and sees what the writers see, cannot create a writer of updates, and a
+//! delta it publishes on the requests topic is refused by every agent.
 
 mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
+use agent::AgentId;
+use agent::envelope::Message;
+use bytes::Bytes;
 use common::{Agent, converge, seed_nodes, seed_path, spawn};
+use transport::rtps::{RtpsConfig, RtpsTransport, SecurityFiles};
+use transport::{Channel, Transport, TransportError};
 
 const GRAPH: &str = "5ec0000000000001";
 
@@ -21,7 +28,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 /// `cortex security init DIR ARGS...`, which must succeed.
-fn pki(dir: &Path, args: &[&str]) {
+fn pki_init(dir: &Path, args: &[&str]) {
     let output = Command::new(env!("CARGO_BIN_EXE_cortex"))
         .args(["security", "init"])
         .arg(dir)
@@ -52,8 +59,8 @@ fn a_secured_graph_converges_and_no_process_without_valid_write_credentials_chan
     let domain = 89;
     let prefix = format!("secure{}", std::process::id());
     let (ours, theirs) = (scratch("pki"), scratch("pki-other"));
-    pki(&ours, &["--agents", "agent1,agent2,agent3,late", "--readers", "inspector", "--expired", "late"]);
-    pki(&theirs, &["--agents", "agent1"]);
+    pki_init(&ours, &["--agents", "agent1,agent2,agent3,late", "--readers", "inspector", "--expired", "late"]);
+    pki_init(&theirs, &["--agents", "agent1"]);
     let credentials = |pki: &Path, name: &str| pki.join(name).to_str().unwrap().to_owned();
     let nodes = seed_nodes();
     let seed = seed_path();
@@ -75,7 +82,8 @@ fn a_secured_graph_converges_and_no_process_without_valid_write_credentials_chan
     converge(&mut [&mut a1, &mut a2, &mut a3], nodes + 9);
     let before = snapshot(&mut [&mut a1, &mut a2, &mut a3]);
 
-    // Read-only and expired credentials are refused before the process joins, with errors that say why.
+    // A reader's credentials without --read-only, and expired credentials, are refused before the process joins,
+    // with errors that say why.
     let read_only = refused(&[
         "--id",
         "7",
@@ -90,7 +98,7 @@ fn a_secured_graph_converges_and_no_process_without_valid_write_credentials_chan
         "--insert-nodes",
         "3",
     ]);
-    assert!(read_only.contains("Not allowed to create a DataWriter"), "{read_only}");
+    assert!(read_only.contains("publish requests alone") && read_only.contains("--read-only"), "{read_only}");
     let expired =
         refused(&["--id", "8", "--domain", "89", "--topic-prefix", &prefix, "--security", &credentials(&ours, "late")]);
     assert!(expired.contains("expired"), "{expired}");
@@ -134,4 +142,115 @@ fn a_secured_graph_converges_and_no_process_without_valid_write_credentials_chan
     }
     let _ = std::fs::remove_dir_all(ours);
     let _ = std::fs::remove_dir_all(theirs);
+}
+
+/// An RTPS transport with the credentials in `dir`, read-only or not, on the test's domain and prefix.
+fn secured_transport(dir: &Path, domain: u16, prefix: &str, read_only: bool) -> Result<RtpsTransport, TransportError> {
+    RtpsTransport::new(RtpsConfig {
+        domain_id: domain,
+        topic_prefix: prefix.to_owned(),
+        security: Some(SecurityFiles { dir: dir.to_path_buf() }),
+        read_only,
+        ..RtpsConfig::default()
+    })
+}
+
+#[test]
+fn a_reader_joins_a_secured_graph_read_only_and_nothing_it_publishes_changes_it() {
+    let domain = 87;
+    let prefix = format!("readonly{}", std::process::id());
+    let pki = scratch("pki-readers");
+    pki_init(&pki, &["--agents", "agent1,agent2,agent3", "--readers", "inspector"]);
+    let credentials = |name: &str| pki.join(name).to_str().unwrap().to_owned();
+    let nodes = seed_nodes();
+    let seed = seed_path();
+    let (c1, c2, reader) = (credentials("agent1"), credentials("agent2"), credentials("inspector"));
+    let first =
+        ["--graph-id", GRAPH, "--security", &c1, "--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"];
+    let mut a1 = spawn(1, domain, &prefix, &first);
+    a1.wait_ready_with(nodes);
+    let second = ["--graph-id", GRAPH, "--security", &c2, "--insert-nodes", "4"];
+    let mut a2 = common::join(2, domain, &prefix, &second, nodes);
+    converge(&mut [&mut a1, &mut a2], nodes + 4);
+    let before = snapshot(&mut [&mut a1, &mut a2]);
+
+    // The reader joins read-only (it asks on the requests topic, the one its permissions let it publish on) and
+    // sees the writers' graph: same node count, same digest.
+    let watching = ["--graph-id", GRAPH, "--security", &reader, "--read-only", "--join-wait-ms", "500"];
+    let mut inspector = spawn(7, domain, &prefix, &watching);
+    let joined = inspector.wait_for(
+        "joined read-only with the writers' graph",
+        Duration::from_secs(60),
+        |s| s.ready && s.nodes == nodes + 4 && s.digest == before[0].1,
+        |_| false,
+    );
+    assert!(joined.read_only, "{joined:?}");
+    // It follows later writes too.
+    let c3 = credentials("agent3");
+    let third = ["--graph-id", GRAPH, "--security", &c3, "--insert-nodes", "2"];
+    let mut a3 = common::join(3, domain, &prefix, &third, nodes + 4);
+    converge(&mut [&mut a1, &mut a2, &mut a3], nodes + 6);
+    let before = snapshot(&mut [&mut a1, &mut a2, &mut a3]);
+    inspector.wait_for(
+        "followed the writers' later writes",
+        Duration::from_secs(30),
+        |s| s.nodes == nodes + 6 && s.digest == before[0].1,
+        |_| false,
+    );
+
+    // It cannot change the graph: local edits are refused with a clear error (after it joined) ...
+    let edit = refused(&[
+        "--id",
+        "8",
+        "--domain",
+        &domain.to_string(),
+        "--topic-prefix",
+        &prefix,
+        "--graph-id",
+        GRAPH,
+        "--security",
+        &reader,
+        "--read-only",
+        "--insert-nodes",
+        "1",
+    ]);
+    assert!(edit.contains("is read-only") && edit.contains("cannot change"), "{edit}");
+    // ... the inspector will not edit with a reader's credentials ...
+    let output = Command::new(env!("CARGO_BIN_EXE_cortex"))
+        .args(["inspect", "--security", &reader, "--allow-edit", "--run-for-ms", "100"])
+        .output()
+        .expect("cortex inspect runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success() && stderr.contains("--allow-edit"), "{stderr}");
+    // ... its credentials let it create no writer of updates (DDS Security's access control refuses it) ...
+    let Err(writer) = secured_transport(Path::new(&reader), domain, &prefix, false) else {
+        panic!("a reader's credentials created writers on every topic");
+    };
+    assert!(writer.to_string().contains("Not allowed to create a DataWriter"), "{writer}");
+    // ... and what a read-only participant may publish, requests, cannot carry a change: a delta published there
+    // is refused by every agent, counted, never applied.
+    let raw = secured_transport(Path::new(&reader), domain, &prefix, true).expect("a read-only secured transport");
+    let refused_write = raw.publish(Channel::Updates, Bytes::from_static(b"x")).unwrap_err();
+    assert!(matches!(refused_write, TransportError::ReadOnly { .. }), "{refused_write}");
+    let mut forger = dsr::Replica::new(AgentId(9).replica(1));
+    let (_, delta) = forger.insert_node(1, dsr::NewNode::new("object", "forged")).unwrap();
+    let graph = GRAPH.parse::<agent::GraphId>().unwrap();
+    let forged = Message::Delta { from: AgentId(9), delta: Bytes::from(delta.encode()) }.encode(Some(graph));
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut writers = [&mut a1, &mut a2, &mut a3];
+    while !writers.iter_mut().all(|a| a.latest().is_some_and(|s| s.misrouted_refused > 0)) {
+        assert!(Instant::now() < deadline, "the forged delta never reached every agent");
+        raw.publish(Channel::Requests, forged.clone()).unwrap();
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    // A few announce periods later, the graph is what it was everywhere, the reader's view included.
+    std::thread::sleep(Duration::from_secs(2));
+    assert_eq!(snapshot(&mut writers), before);
+    let seen = inspector.latest().cloned().unwrap();
+    assert_eq!((seen.nodes, seen.digest.clone()), before[0].clone());
+    for agent in writers {
+        let status = agent.latest().cloned().unwrap();
+        assert!(!status.peers.contains(&9), "agent {} took the forger for a peer: {status:?}", agent.id);
+    }
+    let _ = std::fs::remove_dir_all(pki);
 }

@@ -123,6 +123,7 @@ impl AgentsConfig {
             max_buffered_deltas: 16,
             max_batch_bytes: 256 << 10,
             answer_hold_ns: RETRY_NS,
+            read_only: false,
             plant: self.plant(),
         }
     }
@@ -141,6 +142,8 @@ pub struct Envelope {
     pub from: usize,
     /// Receiver.
     pub to: usize,
+    /// The channel it was sent on (the receiver admits it by channel, as a running agent does).
+    pub channel: transport::Channel,
     /// The encoded message.
     pub bytes: Bytes,
 }
@@ -328,7 +331,7 @@ impl AgentsModel {
             };
             for to in targets {
                 if state.slots[to].core.is_some() && !Self::crosses_cut(state.cut, from, to) {
-                    state.network.push(Envelope { from, to, bytes: bytes.clone() });
+                    state.network.push(Envelope { from, to, channel: send.channel, bytes: bytes.clone() });
                 }
             }
             if matches!(send.message, Message::Snapshot { .. }) {
@@ -390,6 +393,12 @@ impl AgentsModel {
         if message.to().is_some_and(|id| id != core.id()) {
             return;
         }
+        let mut routing = Output::default();
+        if !state.slots[to].core.as_mut().expect("alive").admit_channel(envelope.channel, &message, &mut routing) {
+            let detail = format!("agent {to} refused a {} on channel {}", message.kind(), envelope.channel.name());
+            return self.fail(state, Check::Invariants, detail);
+        }
+        let core = state.slots[to].core.as_ref().expect("alive");
         let decoded = Input::decode(message);
         if let Some((what, error)) = decoded.rejected.first() {
             return self.fail(state, Check::Invariants, format!("agent {to} could not decode a {what}: {error}"));

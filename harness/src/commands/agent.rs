@@ -56,6 +56,11 @@ pub struct AgentArgs {
     /// joining (files, CA signature, expiry).
     #[arg(long)]
     pub security: Option<PathBuf>,
+    /// Follow the graph without changing it: the agent asks for the graph (on the requests channel alone, the one
+    /// a reader of `cortex security init --readers` may publish on), never starts alone, answers nobody and refuses
+    /// local writes (`--insert-nodes`, a role's writes). Needed with a reader's `--security` credentials.
+    #[arg(long)]
+    pub read_only: bool,
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
@@ -198,7 +203,7 @@ impl ValueEnum for RoleArg {
 /// inspect` join a graph, from `seed_json` if no running agent answers within `join_wait_ms`. With `faults`, what
 /// the agent receives goes through the seeded fault injector (seeded with the agent id). `life_file` is where each
 /// life records its incarnation ([`AgentConfig::life_file`]); `graph` the graph it belongs to
-/// ([`AgentConfig::graph`]).
+/// ([`AgentConfig::graph`]). With `rtps.read_only` the agent is read-only too ([`AgentConfig::read_only`]).
 ///
 /// # Errors
 /// An unreadable or invalid seed graph, or a DDS domain that cannot be joined.
@@ -211,7 +216,8 @@ pub fn start_rtps_agent(
     faults: Option<FaultConfig>,
     life_file: Option<PathBuf>,
 ) -> Result<Arc<Agent<AgentTransport>>> {
-    let config = agent_config(id, graph, join_wait_ms, seed_json, life_file)?;
+    let mut config = agent_config(id, graph, join_wait_ms, seed_json, life_file)?;
+    config.read_only = rtps.read_only;
     agent::rtps::start(config, rtps, faults).context("joining the DDS domain")
 }
 
@@ -257,6 +263,19 @@ pub fn security_files(dir: Option<&std::path::Path>) -> Result<Option<transport:
     Ok(Some(transport::rtps::SecurityFiles { dir: dir.to_path_buf() }))
 }
 
+/// Whether the DDS Security credentials in `dir` (if any) let the participant write the graph with topic prefix
+/// `topic_prefix`: `false` for a reader's, which publish requests alone
+/// ([`super::security::may_write_graph`]).
+///
+/// # Errors
+/// An unreadable permissions file.
+pub fn credentials_write(dir: Option<&std::path::Path>, topic_prefix: &str) -> Result<bool> {
+    match dir {
+        None => Ok(true),
+        Some(dir) => super::security::may_write_graph(dir, topic_prefix).context("--security"),
+    }
+}
+
 /// Runs `cortex agent`.
 pub fn run(args: AgentArgs) -> Result<()> {
     let life = life_file(args.state_dir.as_deref(), args.domain, &args.topic_prefix, args.id);
@@ -264,12 +283,25 @@ pub fn run(args: AgentArgs) -> Result<()> {
     if link == Link::Shm && args.security.is_some() {
         bail!("--security protects RTPS; it does not apply to --transport {link}");
     }
-    let config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
+    let mut config = agent_config(args.id, args.graph_id, args.join_wait_ms, args.seed_json.as_deref(), life)?;
+    let security = security_files(args.security.as_deref())?;
+    if !args.read_only && !credentials_write(args.security.as_deref(), &args.topic_prefix)? {
+        bail!(
+            "--security {}: these credentials let this participant publish requests alone (a reader of `cortex \
+             security init --readers`), so it cannot write the graph; start it with --read-only to follow the graph",
+            args.security.as_deref().unwrap_or_else(|| std::path::Path::new("")).display()
+        );
+    }
+    if args.read_only && (args.role.is_some() || args.seed_json.is_some()) {
+        bail!("--read-only: an agent that cannot write runs no --role and starts from no --seed-json");
+    }
+    config.read_only = args.read_only;
     let rtps = RtpsConfig {
         domain_id: args.domain,
         topic_prefix: args.topic_prefix.clone(),
         updates: args.updates.into(),
-        security: security_files(args.security.as_deref())?,
+        security,
+        read_only: args.read_only,
         ..RtpsConfig::default()
     };
     let agent = link.start(config, rtps, args.faults).with_context(|| format!("starting the agent on {link}"))?;

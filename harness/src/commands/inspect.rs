@@ -25,10 +25,16 @@ pub struct InspectArgs {
     /// agent that answers.
     #[arg(long)]
     pub graph_id: Option<agent::GraphId>,
-    /// Join with DDS Security, with the credentials in this directory (see `cortex agent --security`; a
-    /// subscribe-only identity such as `inspector` of `cortex security init` sees the graph but cannot change it).
+    /// Join with DDS Security, with the credentials in this directory (see `cortex agent --security`). When their
+    /// permissions let the participant publish requests alone (a reader of `cortex security init --readers`, such
+    /// as `inspector`), the inspector is read-only by itself, as with `--read-only`.
     #[arg(long)]
     pub security: Option<PathBuf>,
+    /// Follow the graph without changing it: the inspector's agent publishes nothing but requests for the graph,
+    /// never starts alone (it waits for an agent of the graph to answer), the page cannot edit, and no remote calls
+    /// go out (no `--debug-agent`).
+    #[arg(long, conflicts_with_all = ["allow_edit", "demo", "seed_json", "debug_agent"])]
+    pub read_only: bool,
     /// DDS domain id.
     #[arg(long, default_value_t = 0)]
     pub domain: u16,
@@ -75,6 +81,18 @@ pub fn run(args: InspectArgs) -> Result<()> {
         );
     }
     let security = super::agent::security_files(args.security.as_deref())?;
+    let reader = !super::agent::credentials_write(args.security.as_deref(), &args.topic_prefix)?;
+    if reader && (args.allow_edit || args.demo || args.seed_json.is_some() || args.debug_agent.is_some()) {
+        bail!(
+            "--security {}: these credentials let this participant publish requests alone, so the inspector is \
+             read-only: --allow-edit, --demo, --seed-json and --debug-agent need a writer's credentials",
+            args.security.as_deref().map(|p| p.display().to_string()).unwrap_or_default()
+        );
+    }
+    let read_only = args.read_only || reader;
+    if reader && !args.read_only {
+        eprintln!("inspect: the credentials are a reader's (they publish requests alone): joining read-only");
+    }
     let agent = super::agent::start_rtps_agent(
         args.id,
         args.graph_id,
@@ -84,6 +102,7 @@ pub fn run(args: InspectArgs) -> Result<()> {
             domain_id: args.domain,
             topic_prefix: args.topic_prefix.clone(),
             security,
+            read_only,
             ..RtpsConfig::default()
         },
         None,
@@ -112,7 +131,13 @@ pub fn run(args: InspectArgs) -> Result<()> {
     println!(
         "inspector on http://{} ({})",
         inspector.addr(),
-        if args.allow_edit { "edits allowed" } else { "read-only" }
+        if read_only {
+            "read-only participant"
+        } else if args.allow_edit {
+            "edits allowed"
+        } else {
+            "read-only"
+        }
     );
 
     let stop = Arc::new(AtomicBool::new(false));

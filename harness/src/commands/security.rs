@@ -16,8 +16,13 @@
 //!   with ENCRYPT and SIGN alike: its receivers fail to decode, "ring crypto library gives 'Unspecified' error"),
 //!   while submessage protection, which covers the payload too, works.
 //! - Permissions: a writer (`--agents`) may publish and subscribe every topic of the topic prefix on every domain;
-//!   a reader (`--readers`) may only subscribe, so what it publishes is dropped by the others. A participant
-//!   named in `--expired` gets an identity certificate and a grant that ended a day ago.
+//!   a reader (`--readers`) may subscribe every topic and publish on the requests topic alone (`PREFIX_requests`,
+//!   `transport::Channel::Requests`), which carries only messages that ask (graph requests, announces,
+//!   missing-requests) and which agents refuse anything else on. So a reader joins a graph and follows it —
+//!   `cortex inspect --security DIR/READER` sees that its permissions grant no more and starts read-only
+//!   ([`may_write_graph`]) — but cannot create a writer of updates or answers, and nothing it publishes can
+//!   change a graph. A participant named in `--expired` gets an identity certificate and a grant that ended a day
+//!   ago.
 //!
 //! All the cryptography is the `openssl` crate's (the OpenSSL that `rustdds`'s `security` feature links): keys,
 //! certificates, S/MIME signatures. Revocation lists are not offered: `rustdds` 0.15 does not read them
@@ -62,7 +67,8 @@ pub struct InitArgs {
     /// Participants that may publish and subscribe (one directory each).
     #[arg(long, value_delimiter = ',', default_value = "agent1,agent2,agent3")]
     pub agents: Vec<String>,
-    /// Participants that may only subscribe (e.g. an inspector): their samples are dropped by the others.
+    /// Participants that may only read the graph (e.g. an inspector): they subscribe every topic and publish on the
+    /// requests topic alone (asking for the graph), so nothing they publish can change it.
     #[arg(long, value_delimiter = ',', default_value = "inspector")]
     pub readers: Vec<String>,
     /// Participants (among the above) whose certificate and permissions grant ended a day ago.
@@ -208,7 +214,8 @@ fn governance(protection: Protection) -> String {
     )
 }
 
-/// A permissions document of one grant for `common` (subject `CN=common,O=cortex`).
+/// A permissions document of one grant for `common` (subject `CN=common,O=cortex`): subscribe `topics`, and publish
+/// `topics` (a writer) or the requests topic among them alone (a reader).
 fn permissions(common: &str, topics: &str, may_publish: bool, days: (i64, i64)) -> Result<String> {
     let format = |time: i64| {
         let seconds = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_secs() as i64;
@@ -217,7 +224,8 @@ fn permissions(common: &str, topics: &str, may_publish: bool, days: (i64, i64)) 
     };
     let (not_before, not_after) = (format(days.0)?, format(days.1)?);
     let topic = format!("<topics><topic>{topics}</topic></topics>");
-    let publish = if may_publish { format!("<publish>{topic}</publish>") } else { String::new() };
+    let published = if may_publish { topics.to_owned() } else { requests_topic(topics) };
+    let publish = format!("<publish><topics><topic>{published}</topic></topics></publish>");
     Ok(format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"
@@ -318,7 +326,11 @@ pub fn init(args: &InitArgs) -> Result<Vec<String>> {
         write(&dir.join("key.pem"), &key.private_key_to_pem_pkcs8()?)?;
         write(&dir.join("permissions.xml"), permissions_xml.as_bytes())?;
         write(&dir.join("permissions.p7s"), &smime_signed(&ca, &permissions_xml)?)?;
-        let role = if may_publish { "publish and subscribe" } else { "subscribe only" };
+        let role = if may_publish {
+            "publish and subscribe".to_owned()
+        } else {
+            format!("read only (publish on {} alone, subscribe)", requests_topic(&topics))
+        };
         let expired = if args.expired.contains(name) { ", EXPIRED" } else { "" };
         made.push(format!("{}: {role} on {topics}{expired}", dir.display()));
     }
@@ -406,6 +418,63 @@ pub fn check_credentials(dir: &Path) -> Result<String> {
     Ok(format!("identity {subject}, certificate valid until {}", cert.not_after()))
 }
 
+/// The requests topic among `topics` (`*` or `PREFIX_*`): what a reader may publish.
+fn requests_topic(topics: &str) -> String {
+    let prefix = topics.strip_suffix('*').unwrap_or(topics);
+    format!("{prefix}{}", if prefix.is_empty() { "*_requests" } else { "requests" })
+}
+
+/// Whether the permissions in `dir` (`permissions.p7s`, the clear-signed XML) let the participant publish on the
+/// updates topic of the graph with topic prefix `topic_prefix` — that is, write the graph. `false` for a reader of
+/// `cortex security init --readers`, which may publish requests alone: it can join only read-only.
+///
+/// # Errors
+/// An unreadable permissions file, or one with no grant in it.
+pub fn may_write_graph(dir: &Path, topic_prefix: &str) -> Result<bool> {
+    let path = dir.join("permissions.p7s");
+    let text = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text = String::from_utf8_lossy(&text);
+    if !text.contains("<grant") {
+        bail!("{}: no permissions grant found", path.display());
+    }
+    let updates = format!("{topic_prefix}_{}", transport::Channel::Updates.name());
+    let mut rest = text.as_ref();
+    while let Some(section) = between(rest, "<publish>", "</publish>") {
+        let mut topics = section;
+        while let Some(topic) = between(topics, "<topic>", "</topic>") {
+            if glob_matches(topic, &updates) {
+                return Ok(true);
+            }
+            topics = &topics[topics.find("</topic>").map_or(topics.len(), |at| at + "</topic>".len())..];
+        }
+        rest = &rest[rest.find("</publish>").map_or(rest.len(), |at| at + "</publish>".len())..];
+    }
+    Ok(false)
+}
+
+/// Whether `name` matches the DDS topic expression `pattern` (`*` any run of characters, `?` one; as `fnmatch`).
+fn glob_matches(pattern: &str, name: &str) -> bool {
+    let (pattern, name) = (pattern.as_bytes(), name.as_bytes());
+    let (mut p, mut n) = (0, 0);
+    let mut star: Option<(usize, usize)> = None;
+    while n < name.len() {
+        if p < pattern.len() && (pattern[p] == b'?' || pattern[p] == name[n]) {
+            p += 1;
+            n += 1;
+        } else if p < pattern.len() && pattern[p] == b'*' {
+            star = Some((p, n));
+            p += 1;
+        } else if let Some((star_p, star_n)) = star {
+            p = star_p + 1;
+            n = star_n + 1;
+            star = Some((star_p, star_n + 1));
+        } else {
+            return false;
+        }
+    }
+    pattern[p..].iter().all(|&c| c == b'*')
+}
+
 fn between<'t>(text: &'t str, start: &str, end: &str) -> Option<&'t str> {
     let from = text.find(start)? + start.len();
     let to = text[from..].find(end)? + from;
@@ -415,6 +484,43 @@ fn between<'t>(text: &'t str, start: &str, end: &str) -> Option<&'t str> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn topic_expressions_match_as_fnmatch_does() {
+        assert!(glob_matches("*", "dsr_updates"));
+        assert!(glob_matches("dsr_*", "dsr_updates"));
+        assert!(glob_matches("*_requests", "dsr_requests"));
+        assert!(!glob_matches("*_requests", "dsr_updates"));
+        assert!(!glob_matches("dsr_requests", "dsr_requests_be"));
+        assert!(glob_matches("d?r_*s", "dsr_updates"));
+        assert!(!glob_matches("robot_*", "dsr_updates"));
+    }
+
+    #[test]
+    fn readers_may_publish_requests_alone_and_writers_may_write_the_graph() {
+        let dir = std::env::temp_dir().join(format!("cortex-unit-pki-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for (prefix, topics) in [("*", "dsr"), ("robot", "robot")] {
+            let pki = dir.join(prefix.replace('*', "all"));
+            let args = InitArgs {
+                dir: pki.clone(),
+                agents: vec!["writer".into()],
+                readers: vec!["reader".into()],
+                expired: Vec::new(),
+                topic_prefix: prefix.into(),
+                protection: Protection::Sign,
+                days: 2,
+            };
+            init(&args).unwrap();
+            assert!(may_write_graph(&pki.join("writer"), topics).unwrap());
+            assert!(!may_write_graph(&pki.join("reader"), topics).unwrap());
+            let xml = std::fs::read_to_string(pki.join("reader/permissions.xml")).unwrap();
+            let requests = if prefix == "*" { "*_requests" } else { "robot_requests" };
+            assert!(xml.contains(&format!("<publish><topics><topic>{requests}</topic>")), "{xml}");
+        }
+        assert!(may_write_graph(&dir.join("nowhere"), "dsr").unwrap_err().to_string().contains("permissions.p7s"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn utc_text_formats_known_instants() {

@@ -17,9 +17,7 @@ use std::time::{Duration, Instant};
 
 use bytes::Bytes;
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
-use dsr::{
-    AttrKey, AttrType, Change, Delta, Digest, EdgeKey, Element, NewNode, NodeId, OpError, Replica, Value, VisibleGraph,
-};
+use dsr::{AttrKey, AttrType, Change, Digest, Element, NodeId, OpError, Replica, Value, VisibleGraph};
 use transport::{Channel, Clock, Sample, Transport, TransportError};
 
 pub use crate::config::AgentConfig;
@@ -27,8 +25,10 @@ pub use crate::status::{AgentStatus, AnswerTiming, JoinTimeline, StatusLine};
 
 use crate::AgentId;
 use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
-use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Output, Send, WriteRefusal};
+use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Output, Send};
 use crate::envelope::{Envelope, Message};
+
+mod writes;
 
 /// Errors of the agent API.
 #[derive(Debug, thiserror::Error)]
@@ -47,6 +47,9 @@ pub enum AgentError {
         /// What was seen.
         detail: String,
     },
+    /// The agent is read-only ([`AgentConfig::read_only`]): it follows the graph and never changes it.
+    #[error("{0} is read-only: it follows the graph and cannot change it (local edits are refused)")]
+    ReadOnly(AgentId),
     /// The replica refused the operation.
     #[error("{agent}: {source}")]
     Op {
@@ -368,6 +371,8 @@ impl<T: Transport + 'static> Agent<T> {
             graph: core.graph(),
             foreign_refused: core.foreign_refused(),
             foreign_graphs: core.foreign_graphs().iter().copied().collect(),
+            misrouted_refused: core.misrouted_refused(),
+            read_only: self.inner.config.read_only,
             rejected: self.inner.rejected.load(Ordering::Relaxed),
             signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
@@ -395,6 +400,8 @@ impl<T: Transport + 'static> Agent<T> {
             graph: status.graph,
             foreign_refused: status.foreign_refused,
             foreign_graphs: status.foreign_graphs,
+            misrouted_refused: status.misrouted_refused,
+            read_only: status.read_only,
             replica: status.replica.map(|r| r.0),
             nodes: status.nodes,
             edges: status.edges,
@@ -458,131 +465,6 @@ impl<T: Transport + 'static> Agent<T> {
     /// The visible graph in canonical form.
     pub fn visible_graph(&self) -> Option<VisibleGraph> {
         self.read(Replica::visible_graph)
-    }
-
-    // -------------------------------------------------------------------------------------------------------
-    // Writes: the replica operation under the lock, the publish after it.
-
-    fn write<R>(
-        &self,
-        op: impl FnOnce(&mut Replica, u64) -> Result<(R, Arc<Delta>), OpError>,
-    ) -> Result<R, AgentError> {
-        self.write_deltas(|r, now| op(r, now).map(|(result, delta)| (result, vec![delta])))
-    }
-
-    /// A local operation that makes several deltas (each is published).
-    fn write_deltas<R>(
-        &self,
-        op: impl FnOnce(&mut Replica, u64) -> Result<(R, Vec<Arc<Delta>>), OpError>,
-    ) -> Result<R, AgentError> {
-        let agent = self.inner.config.id;
-        let now = self.inner.clock.now_ns();
-        let written = self.inner.lock().core.write(now, op);
-        let (result, written) = written.map_err(|refusal| match refusal {
-            WriteRefusal::NotJoined => AgentError::NotJoined(agent),
-            WriteRefusal::Collision(detail) => AgentError::IdCollision { agent, detail },
-            WriteRefusal::Op(source) => AgentError::Op { agent, source },
-        })?;
-        // Encoded here, with the lock released.
-        self.inner.send(written.sends(), None);
-        self.inner.signal(written.changes);
-        Ok(result)
-    }
-
-    /// Runs several local operations at once on the agent's replica (a log bridge, a batch import) and publishes
-    /// every delta `op` returns, after the lock is released. `op` gets the replica and the agent clock's `now_ns`;
-    /// keep it short: it holds the lock readers wait on.
-    ///
-    /// # Errors
-    /// [`AgentError`]: not joined, or an id collision.
-    pub fn update<R>(&self, op: impl FnOnce(&mut Replica, u64) -> (R, Vec<Arc<Delta>>)) -> Result<R, AgentError> {
-        self.write_deltas(|replica, now| Ok(op(replica, now)))
-    }
-
-    /// Inserts a node; returns its id.
-    ///
-    /// # Errors
-    /// [`AgentError`]: not joined, id collision, or the replica refused it.
-    pub fn insert_node(&self, node: NewNode) -> Result<NodeId, AgentError> {
-        self.write(|r, now| r.insert_node(now, node))
-    }
-
-    /// Deletes a node (and hides its edges).
-    ///
-    /// # Errors
-    /// As [`Agent::insert_node`].
-    pub fn delete_node(&self, id: NodeId) -> Result<(), AgentError> {
-        self.write(|r, now| r.delete_node(now, id).map(|d| ((), d)))
-    }
-
-    /// Inserts an edge with attributes; returns its key.
-    ///
-    /// # Errors
-    /// As [`Agent::insert_node`].
-    pub fn insert_edge(
-        &self,
-        from: NodeId,
-        to: NodeId,
-        edge_type: &str,
-        attrs: Vec<(String, Value)>,
-    ) -> Result<EdgeKey, AgentError> {
-        self.write(|r, now| r.insert_edge(now, from, to, edge_type, attrs))
-    }
-
-    /// Deletes an edge.
-    ///
-    /// # Errors
-    /// As [`Agent::insert_node`].
-    pub fn delete_edge(&self, key: &EdgeKey) -> Result<(), AgentError> {
-        self.write(|r, now| r.delete_edge(now, key).map(|d| ((), d)))
-    }
-
-    /// Writes one attribute with a typed key.
-    ///
-    /// # Errors
-    /// As [`Agent::insert_node`].
-    pub fn set_attr<V: AttrType>(
-        &self,
-        element: impl Into<Element>,
-        key: AttrKey<V>,
-        value: impl Into<V>,
-    ) -> Result<(), AgentError> {
-        self.write(|r, now| r.set_attr(now, element, key, value).map(|d| ((), d)))
-    }
-
-    /// Writes several attributes as one delta.
-    ///
-    /// # Errors
-    /// As [`Agent::insert_node`].
-    pub fn set_attrs<'n>(
-        &self,
-        element: impl Into<Element>,
-        attrs: impl IntoIterator<Item = (&'n str, Value)>,
-    ) -> Result<(), AgentError> {
-        self.write(|r, now| r.set_attrs(now, element, attrs).map(|d| ((), d)))
-    }
-
-    /// Removes an attribute.
-    ///
-    /// # Errors
-    /// As [`Agent::insert_node`].
-    pub fn remove_attr(&self, element: impl Into<Element>, name: &str) -> Result<(), AgentError> {
-        self.write(|r, now| r.remove_attr(now, element, name).map(|d| ((), d)))
-    }
-
-    /// Places `child` under `parent` with an RT edge (inserting or moving it): translation in mm, Euler x y z in
-    /// rad (`dsr::Replica::set_rt`; its deltas are published in order).
-    ///
-    /// # Errors
-    /// As [`Agent::insert_node`].
-    pub fn set_rt(
-        &self,
-        parent: NodeId,
-        child: NodeId,
-        translation_mm: [f32; 3],
-        euler_xyz_rad: [f32; 3],
-    ) -> Result<(), AgentError> {
-        self.write_deltas(|r, now| r.set_rt(now, parent, child, translation_mm, euler_xyz_rad).map(|d| ((), d)))
     }
 
     // -------------------------------------------------------------------------------------------------------
@@ -780,6 +662,13 @@ impl<T: Transport> Inner<T> {
                 Event::IncarnationsExhausted => {
                     tracing::error!("{me}: no incarnation is left for a new life; local writes are refused")
                 }
+                Event::Misrouted { from, kind, first: true } => tracing::warn!(
+                    "{me}: refused a {kind} from {from} ({origin}): only requests travel on the requests channel; \
+                     later ones are counted (`misrouted_refused`) without another warning"
+                ),
+                Event::Misrouted { from, kind, first: false } => {
+                    tracing::debug!("{me}: refused a {kind} from {from} ({origin}) on the requests channel")
+                }
                 Event::ForeignGraph { graph, from, kind, mine } => {
                     let mine = mine.map_or_else(|| "none yet".to_string(), |g| g.to_string());
                     tracing::warn!(
@@ -801,6 +690,16 @@ impl<T: Transport> Inner<T> {
         if message.to().is_some_and(|to| to != self.me()) {
             return;
         }
+        {
+            // Only asking travels on the requests channel: anything else there is refused before it touches anything.
+            let mut locked = self.lock();
+            let mut out = Output::default();
+            let admitted = locked.core.admit_channel(sample.channel, &message, &mut out);
+            self.report(&mut locked, &out.events, &origin());
+            if !admitted {
+                return;
+            }
+        }
         let me = self.me();
         // Calls never touch the replica: route them without holding the state lock across the server.
         let message = match message {
@@ -816,7 +715,8 @@ impl<T: Transport> Inner<T> {
                     admitted
                 };
                 match message {
-                    Message::CallRequest { from, call, method, args, .. } if admitted => {
+                    // A read-only agent may not publish the reply; it serves no calls.
+                    Message::CallRequest { from, call, method, args, .. } if admitted && !self.config.read_only => {
                         return self.service.request(me, from, call, &method, args);
                     }
                     Message::CallReply { from, call, result, .. } if admitted => {

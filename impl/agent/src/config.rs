@@ -65,6 +65,11 @@ pub struct AgentConfig {
     pub max_calls_in_flight: usize,
     /// Most call replies of this agent's server waiting to be published.
     pub call_reply_outbox: usize,
+    /// Read-only ([`ProtocolConfig::read_only`]): the agent asks for the graph and follows it, publishes nothing but
+    /// requests ([`transport::Channel::Requests`]), never starts alone, and refuses local writes
+    /// ([`crate::AgentError::ReadOnly`]). Give its RTPS transport `read_only` too when its credentials grant
+    /// publishing requests alone.
+    pub read_only: bool,
     /// A planted protocol bug (always none without the `mutants` feature).
     pub plant: Plant,
 }
@@ -91,6 +96,7 @@ impl AgentConfig {
             recorded_incarnation: None,
             max_calls_in_flight: 64,
             call_reply_outbox: 256,
+            read_only: false,
             plant: Plant::NONE,
         }
     }
@@ -109,6 +115,7 @@ impl AgentConfig {
             max_buffered_deltas: self.max_buffered_deltas,
             max_batch_bytes: self.max_batch_bytes,
             answer_hold_ns: self.answer_hold.as_nanos() as u64,
+            read_only: self.read_only,
             plant: self.plant,
         }
     }

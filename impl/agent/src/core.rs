@@ -13,6 +13,12 @@
 //! periodic work at `now_ns`, [`AgentCore::discovery_matched`] a new peer endpoint, [`AgentCore::write`] a local
 //! operation. [`AgentCore::next_deadline_ns`] says when the next tick has work to do.
 //!
+//! **Channels.** Each message travels on its own channel ([`Message::channel`]): deltas on updates, answers on sync,
+//! and asking alone ([`Message::asks`]: graph requests, announces, missing-requests) on [`Channel::Requests`], the
+//! one channel a read-only participant may write. [`AgentCore::admit_channel`] refuses anything else arriving on
+//! it (counted, never applied), so a participant allowed to ask cannot change a graph. A read-only life
+//! ([`ProtocolConfig::read_only`]) publishes on that channel alone.
+//!
 //! **Lives.** Replica ids are `incarnation << 12 | agent_id`. A life chooses its incarnation when it becomes ready:
 //! one above every incarnation of this agent id seen in what it heard (announces, snapshots, the graph it joined)
 //! and above the incarnation recorded by the previous life on this host ([`LifeSeed::recorded_incarnation`]; the
@@ -90,6 +96,8 @@ pub struct AgentCore {
     foreign: BTreeSet<GraphId>,
     /// Messages of other graphs refused.
     foreign_refused: u64,
+    /// Messages refused for arriving on a channel that does not carry them ([`AgentCore::admit_channel`]).
+    misrouted_refused: u64,
     /// Deltas received while joining, with their graph.
     buffered: VecDeque<(GraphId, AgentId, Arc<Delta>)>,
     collision: Option<String>,
@@ -122,6 +130,7 @@ impl AgentCore {
             incarnation_floor: 0,
             foreign: BTreeSet::new(),
             foreign_refused: 0,
+            misrouted_refused: 0,
             buffered: VecDeque::new(),
             collision: None,
             next_announce_ns: now_ns,
@@ -153,6 +162,24 @@ impl AgentCore {
     /// Messages of other graphs refused so far.
     pub fn foreign_refused(&self) -> u64 {
         self.foreign_refused
+    }
+
+    /// Messages refused so far for arriving on a channel that does not carry them ([`AgentCore::admit_channel`]).
+    pub fn misrouted_refused(&self) -> u64 {
+        self.misrouted_refused
+    }
+
+    /// Whether `message`, received on `channel`, may be handled: anything that does not ask ([`Message::asks`])
+    /// arriving on [`Channel::Requests`] is refused — counted, reported in `out`, never applied — since the
+    /// requests channel is the one a read-only participant may write, and nothing on it may change a graph.
+    pub fn admit_channel(&mut self, channel: Channel, message: &Message, out: &mut Output) -> bool {
+        if channel != Channel::Requests || message.asks() {
+            return true;
+        }
+        self.misrouted_refused += 1;
+        let first = self.misrouted_refused == 1;
+        out.events.push(Event::Misrouted { from: message.from(), kind: message.kind(), first });
+        false
     }
 
     /// The foreign graph ids seen (at most [`MAX_FOREIGN_GRAPHS`]).
@@ -262,7 +289,11 @@ impl AgentCore {
     /// The earliest time at which [`AgentCore::tick`] has work to do.
     pub fn next_deadline_ns(&self) -> u64 {
         if self.replica.is_none() {
-            let wait_end = self.joining_since_ns.saturating_add(self.config.join_wait_ns);
+            let wait_end = if self.config.read_only {
+                u64::MAX
+            } else {
+                self.joining_since_ns.saturating_add(self.config.join_wait_ns)
+            };
             let retry =
                 self.last_request_ns.map_or(self.joining_since_ns, |at| at.saturating_add(self.config.join_retry_ns));
             return wait_end.min(retry);
@@ -271,7 +302,7 @@ impl AgentCore {
             .unannounced_write_ns
             .filter(|_| self.config.quiet_announce_ns > 0)
             .map_or(u64::MAX, |at| at.saturating_add(self.config.quiet_announce_ns));
-        self.next_announce_ns.min(quiet)
+        if self.config.read_only { u64::MAX } else { self.next_announce_ns.min(quiet) }
     }
 
     /// Discovery matched a new peer endpoint: while joining, the next tick asks for the graph at once (a request
@@ -290,7 +321,7 @@ impl AgentCore {
     fn tick_unstamped(&mut self, now_ns: u64) -> Output {
         let mut out = Output::default();
         if self.replica.is_none() {
-            if now_ns.saturating_sub(self.joining_since_ns) >= self.config.join_wait_ns {
+            if now_ns.saturating_sub(self.joining_since_ns) >= self.config.join_wait_ns && !self.config.read_only {
                 self.become_ready(now_ns, None, &mut out);
             } else {
                 let due = self.last_request_ns.is_none_or(|at| {
@@ -302,9 +333,12 @@ impl AgentCore {
                     self.request_now = false;
                     out.events.push(Event::GraphRequested);
                     let request = Message::GraphRequest { from: self.id(), nonce: self.life.nonce };
-                    out.send(Channel::Sync, request, Dest::All);
+                    out.send(request, Dest::All);
                 }
             }
+            return out;
+        }
+        if self.config.read_only {
             return out;
         }
         let quiet = self.config.quiet_announce_ns;
@@ -324,7 +358,7 @@ impl AgentCore {
                 applied,
                 digest,
             };
-            out.send(Channel::Sync, announce, Dest::All);
+            out.send(announce, Dest::All);
             self.next_announce_ns = if self.config.plant.is(ProtocolMutant::AnnounceTimerLost) {
                 u64::MAX
             } else {
@@ -406,12 +440,15 @@ impl AgentCore {
     /// it (a camera frame's encoding would otherwise keep readers waiting).
     ///
     /// # Errors
-    /// [`WriteRefusal`]: not ready, an id collision, or the replica refused the operation (nothing changed).
+    /// [`WriteRefusal`]: read-only, not ready, an id collision, or the replica refused the operation (nothing changed).
     pub fn write<R>(
         &mut self,
         now_ns: u64,
         op: impl FnOnce(&mut Replica, u64) -> Result<(R, Vec<Arc<Delta>>), OpError>,
     ) -> Result<(R, Written), WriteRefusal> {
+        if self.config.read_only {
+            return Err(WriteRefusal::ReadOnly);
+        }
         if let Some(detail) = &self.collision {
             return Err(WriteRefusal::Collision(detail.clone()));
         }

@@ -14,6 +14,7 @@
 use bytes::Bytes;
 use dsr::{CausalContext, Dot, ReplicaId};
 use serde::{Deserialize, Serialize};
+use transport::Channel;
 
 use crate::AgentId;
 use crate::graph_id::GraphId;
@@ -268,6 +269,27 @@ fn put<T: Serialize + ?Sized>(out: Vec<u8>, value: &T) -> Vec<u8> {
 }
 
 impl Message {
+    /// Whether the message only asks: a graph request, an announce of the operations its sender has applied, or a
+    /// missing-request. Nothing asking can change a receiver's graph (at most it makes the receiver answer, or ask
+    /// in turn), so these alone travel on [`Channel::Requests`], the one channel a read-only participant may write.
+    pub fn asks(&self) -> bool {
+        matches!(self, Message::Announce { .. } | Message::MissingRequest { .. } | Message::GraphRequest { .. })
+    }
+
+    /// The channel the message travels on: deltas on [`Channel::Updates`], asking ([`Message::asks`]) on
+    /// [`Channel::Requests`], answers (missing deltas, snapshots, graph answers) on [`Channel::Sync`], calls on
+    /// [`Channel::Calls`].
+    pub fn channel(&self) -> Channel {
+        match self {
+            Message::Delta { .. } => Channel::Updates,
+            Message::Announce { .. } | Message::MissingRequest { .. } | Message::GraphRequest { .. } => {
+                Channel::Requests
+            }
+            Message::Deltas { .. } | Message::Snapshot { .. } | Message::GraphAnswer { .. } => Channel::Sync,
+            Message::CallRequest { .. } | Message::CallReply { .. } => Channel::Calls,
+        }
+    }
+
     /// The kind's name, for logs.
     pub fn kind(&self) -> &'static str {
         match self {

@@ -65,6 +65,11 @@ pub struct AgentStatus {
     pub foreign_refused: u64,
     /// The foreign graph ids heard (at most `crate::core::MAX_FOREIGN_GRAPHS`).
     pub foreign_graphs: Vec<GraphId>,
+    /// Messages refused for arriving on a channel that does not carry them: anything but asking on the requests
+    /// channel (see `crate::core`, **Channels**).
+    pub misrouted_refused: u64,
+    /// Whether the agent is read-only (`AgentConfig::read_only`).
+    pub read_only: bool,
     /// Samples rejected (foreign, malformed, or refused by the replica).
     pub rejected: u64,
     /// Change signals dropped because a subscriber's channel was full.
@@ -117,6 +122,12 @@ pub struct StatusLine {
     /// The foreign graph ids heard.
     #[serde(default)]
     pub foreign_graphs: Vec<GraphId>,
+    /// Messages refused for arriving on the requests channel without asking (never applied).
+    #[serde(default)]
+    pub misrouted_refused: u64,
+    /// Whether the agent is read-only: it follows the graph and never changes it.
+    #[serde(default)]
+    pub read_only: bool,
     /// The replica id of this life, once ready.
     pub replica: Option<u32>,
     /// Visible nodes.

@@ -33,26 +33,37 @@ pub mod shm;
 
 /// A logical stream of samples. Each channel is its own topic on RTPS, so a large snapshot on [`Channel::Sync`]
 /// never delays a small update on [`Channel::Updates`].
+///
+/// What may be written on a channel is what DDS Security's permissions grant per topic: a read-only participant
+/// (an inspector) may publish on [`Channel::Requests`] alone, which carries only messages that ask and can never
+/// change a graph, and subscribe to every channel ([`rtps::RtpsConfig::read_only`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Channel {
     /// Deltas of local operations, as they happen.
     Updates,
-    /// Anti-entropy and late join: version-vector announces, graph requests, missing deltas, snapshots.
+    /// Answers of anti-entropy and late join: missing deltas, snapshots, graph answers.
     Sync,
     /// Remote component calls: requests and replies.
     Calls,
+    /// Asking only: graph requests, announces of the operations one has applied, missing-requests. Nothing on it
+    /// can change a graph; an agent refuses anything else that arrives on it.
+    Requests,
 }
 
 impl Channel {
-    /// All channels, in index order.
-    pub const ALL: [Channel; 3] = [Channel::Updates, Channel::Sync, Channel::Calls];
+    /// How many channels there are (the length of per-channel arrays).
+    pub const COUNT: usize = 4;
 
-    /// A small index (0, 1, 2) for arrays of per-channel things.
+    /// All channels, in index order.
+    pub const ALL: [Channel; Channel::COUNT] = [Channel::Updates, Channel::Sync, Channel::Calls, Channel::Requests];
+
+    /// A small index (0 to [`Channel::COUNT`] − 1) for arrays of per-channel things.
     pub fn index(self) -> usize {
         match self {
             Channel::Updates => 0,
             Channel::Sync => 1,
             Channel::Calls => 2,
+            Channel::Requests => 3,
         }
     }
 
@@ -62,6 +73,7 @@ impl Channel {
             Channel::Updates => "updates",
             Channel::Sync => "sync",
             Channel::Calls => "calls",
+            Channel::Requests => "requests",
         }
     }
 }
@@ -116,6 +128,12 @@ pub enum TransportError {
         /// The limit.
         limit: usize,
     },
+    /// The transport was started read-only ([`rtps::RtpsConfig::read_only`]): it has no writer for this channel.
+    #[error("channel {channel} is not writable: this transport is read-only (it writes on requests only)")]
+    ReadOnly {
+        /// The channel name.
+        channel: &'static str,
+    },
     /// The transport was closed.
     #[error("transport closed")]
     Closed,
@@ -156,7 +174,7 @@ pub trait Transport: Send + Sync {
     fn stats(&self) -> TransportStats;
 
     /// A number that grows whenever discovery matches this endpoint with a new remote endpoint on
-    /// [`Channel::Sync`] (a peer that can now hear, or be heard on, the channel of graph requests and answers).
+    /// [`Channel::Requests`] or [`Channel::Sync`] (a peer that can now hear a graph request, or be heard answering).
     /// Transports without discovery return 0 forever. A joining agent repeats its graph request when it grows,
     /// rather than waiting for its retry period: a request published before the match reaches nobody.
     fn sync_matches(&self) -> u64 {

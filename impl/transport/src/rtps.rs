@@ -57,14 +57,19 @@
 //! repair: agents repair it by anti-entropy, and at once when a later delta of the same writer shows the gap (see
 //! the `agent` crate). Reliable stays the default.
 //!
+//! **Read-only** ([`RtpsConfig::read_only`]). A transport may start with one writer, for [`Channel::Requests`],
+//! and readers for every channel: what a participant whose DDS Security permissions grant publishing on the
+//! requests topic alone can create (`rustdds` refuses a writer the permissions do not grant: "Not allowed to create
+//! a DataWriter"). Publishing on another channel is then refused ([`TransportError::ReadOnly`]).
+//!
 //! A sample meant for one peer ([`Transport::publish_to`], e.g. a graph answer) is written to that participant's
 //! reader alone (a directed write; the other readers get a GAP for its sequence number), so a multi-megabyte answer
 //! is not copied to every reader — including this participant's own reader, which rustdds matches too.
 //!
 //! Discovery is observed through the participant's status events: [`RtpsTransport::discovery`] tells when the
 //! first remote participant was discovered and when each channel's writer and reader matched their first remote
-//! endpoint, and [`Transport::sync_matches`] counts the matches on [`Channel::Sync`] so a joining agent can ask for
-//! the graph as soon as a peer can hear it. (rustdds sends a new participant's first discovery announcement 100 ms
+//! endpoint, and [`Transport::sync_matches`] counts the matches on [`Channel::Requests`] and [`Channel::Sync`] so a
+//! joining agent can ask for the graph as soon as a peer can hear it. (rustdds sends a new participant's first discovery announcement 100 ms
 //! after it is created — a constant of rustdds 0.15, not a setting — so no peer is found sooner than that.)
 //!
 //! **Recovery** (issue 14). `rustdds` 0.15 runs two threads per participant — its event loop
@@ -152,8 +157,9 @@ pub struct RtpsTransport {
 /// The part of the DDS entities in use that publishing needs; the receiving thread replaces each of them in place
 /// when it rebuilds the participants. Fields drop in order: the writers before the participants.
 struct Shared {
-    /// One writer per channel (by [`Channel::index`]).
-    writers: Vec<Mutex<Writer>>,
+    /// One writer per channel (by [`Channel::index`]); `None` for a channel a read-only transport does not write
+    /// ([`RtpsConfig::read_only`]).
+    writers: Vec<Mutex<Option<Writer>>>,
     /// The best-effort updates writer and the largest sample it takes ([`UpdateDelivery::BestEffort`]).
     best_effort: Option<(Mutex<Writer>, usize)>,
     /// This transport's endpoint id (its publishing participant's GUID prefix, which tags its samples) and the GUID
@@ -321,7 +327,7 @@ impl RtpsTransport {
             let reading_prefix = self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()).1;
             let mut announce = READERS_AT.to_vec();
             announce.extend_from_slice(&reading_prefix);
-            self.write_sample(Channel::Sync, Bytes::from(announce), None)?;
+            self.write_sample(Channel::Requests, Bytes::from(announce), None)?;
         }
         self.write_sample(channel, bytes, reader)
     }
@@ -350,6 +356,9 @@ impl RtpsTransport {
             return Ok(());
         }
         let writer = self.shared.writers[channel.index()].lock().unwrap_or_else(|p| p.into_inner());
+        let Some(writer) = writer.as_ref() else {
+            return Err(TransportError::ReadOnly { channel: channel.name() });
+        };
         let deadline = Instant::now() + self.config.max_blocking * 4;
         let payload = Payload(bytes);
         loop {

@@ -2,7 +2,7 @@
 //! graph, which the same-host agents open by name.
 //!
 //! This module is the same-host path: [`ShmLane`] moves one channel's samples between the endpoints of one host
-//! through shared memory, and [`ShmTransport`] makes the three channels a [`crate::Transport`] (used by
+//! through shared memory, and [`ShmTransport`] makes every channel a [`crate::Transport`] (used by
 //! `cortex agent --transport shm`, and the same-host half of [`crate::hybrid`], the default); [`limit`] is the raw
 //! iceoryx2 limit they are measured against (`cortex bench payload`).
 //!

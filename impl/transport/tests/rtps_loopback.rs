@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use bytes::Bytes;
 use transport::rtps::{RtpsConfig, RtpsTransport, UpdateDelivery, estimated_wire_bytes};
-use transport::{Channel, Transport};
+use transport::{Channel, Transport, TransportError};
 
 fn config(prefix: &str) -> RtpsConfig {
     RtpsConfig { domain_id: 77, topic_prefix: prefix.into(), ..RtpsConfig::default() }
@@ -58,7 +58,7 @@ fn loopback_delivers_everything_in_order_per_channel() {
                     assert_eq!(sample.bytes, big);
                     large += 1;
                 }
-                Channel::Calls => {}
+                Channel::Calls | Channel::Requests => {}
             }
         }
     }
@@ -206,8 +206,8 @@ fn a_directed_sample_reaches_its_peer_alone_and_discovery_is_timed() {
     let a = RtpsTransport::new(config(&prefix)).unwrap();
     let b = RtpsTransport::new(config(&prefix)).unwrap();
     let c = RtpsTransport::new(config(&prefix)).unwrap();
-    // b's and c's sync readers and writers: four matches, none of them a's own reader and writer.
-    wait_for_sync_matches(&a, 4);
+    // b's and c's requests and sync readers and writers: eight matches, none of them a's own reader and writer.
+    wait_for_sync_matches(&a, 8);
     let times = a.discovery();
     let sync = Channel::Sync.index();
     let first_peer = times.first_participant_ns.expect("a peer was discovered");
@@ -215,31 +215,62 @@ fn a_directed_sample_reaches_its_peer_alone_and_discovery_is_timed() {
     assert!(times.writer_matched_ns[sync].is_some_and(|t| t >= times.created_ns));
     assert!(times.reader_matched_ns[sync].is_some_and(|t| t >= times.created_ns));
 
-    let next_sync = |t: &RtpsTransport| {
+    let next_on = |t: &RtpsTransport, channel: Channel| {
         let deadline = Instant::now() + Duration::from_secs(20);
         while Instant::now() < deadline {
             if let Some(sample) = t.recv_timeout(Duration::from_millis(100))
-                && sample.channel == Channel::Sync
+                && sample.channel == channel
             {
                 return sample.bytes;
             }
         }
-        panic!("no sync sample within 20 s");
+        panic!("no {} sample within 20 s", channel.name());
     };
-    // b's readers live in its second participant: a learns where from the control sample b's transport sends
-    // before its first sample after a match (here a request, as a joining agent's would be). The control sample
-    // itself reaches no inbox.
+    // b's readers live in its second participant: a learns where from the control sample b's transport sends on
+    // its requests writer before its first sample after a match (here a request, as a joining agent's would be).
+    // The control sample itself reaches no inbox.
     // (VOLATILE: b's writer must have matched a's and c's readers itself, or its sample is not for them.)
-    wait_for_sync_matches(&b, 4);
-    wait_for_sync_matches(&c, 4);
-    b.publish(Channel::Sync, Bytes::from_static(b"request from b")).unwrap();
-    assert_eq!(next_sync(&a), Bytes::from_static(b"request from b"));
-    assert_eq!(next_sync(&c), Bytes::from_static(b"request from b"));
+    wait_for_sync_matches(&b, 8);
+    wait_for_sync_matches(&c, 8);
+    b.publish(Channel::Requests, Bytes::from_static(b"request from b")).unwrap();
+    assert_eq!(next_on(&a, Channel::Requests), Bytes::from_static(b"request from b"));
+    assert_eq!(next_on(&c, Channel::Requests), Bytes::from_static(b"request from b"));
 
     // Per writer, samples arrive in order: c seeing "everyone" first proves it was never sent "for b".
     a.publish_to(Channel::Sync, Bytes::from_static(b"for b"), b.local_id()).unwrap();
     a.publish(Channel::Sync, Bytes::from_static(b"everyone")).unwrap();
-    assert_eq!(next_sync(&b), Bytes::from_static(b"for b"));
-    assert_eq!(next_sync(&b), Bytes::from_static(b"everyone"));
-    assert_eq!(next_sync(&c), Bytes::from_static(b"everyone"), "a sample directed to b went to c too");
+    assert_eq!(next_on(&b, Channel::Sync), Bytes::from_static(b"for b"));
+    assert_eq!(next_on(&b, Channel::Sync), Bytes::from_static(b"everyone"));
+    assert_eq!(next_on(&c, Channel::Sync), Bytes::from_static(b"everyone"), "a sample directed to b went to c too");
+}
+
+#[test]
+fn a_read_only_transport_writes_requests_alone_and_reads_every_channel() {
+    let prefix = format!("ro{}", std::process::id());
+    let writer = RtpsTransport::new(config(&prefix)).unwrap();
+    let reader = RtpsTransport::new(RtpsConfig { read_only: true, ..config(&prefix) }).unwrap();
+    for channel in [Channel::Updates, Channel::Sync, Channel::Calls] {
+        let refused = reader.publish(channel, Bytes::from_static(b"not mine to write")).unwrap_err();
+        assert!(matches!(refused, TransportError::ReadOnly { .. }), "{channel:?}: {refused}");
+        assert!(refused.to_string().contains("read-only"), "{refused}");
+    }
+    // The reader's requests reach the writer; the writer's samples on every channel reach the reader.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        assert!(Instant::now() < deadline, "the read-only transport's request never arrived");
+        reader.publish(Channel::Requests, Bytes::from_static(b"ask")).unwrap();
+        if writer.recv_timeout(Duration::from_millis(100)).is_some_and(|s| s.channel == Channel::Requests) {
+            break;
+        }
+    }
+    let mut heard = std::collections::BTreeSet::new();
+    while heard.len() < Channel::COUNT {
+        assert!(Instant::now() < deadline, "the read-only transport heard only {heard:?}");
+        for channel in Channel::ALL {
+            writer.publish(channel, Bytes::from_static(b"for all")).unwrap();
+        }
+        while let Some(sample) = reader.recv_timeout(Duration::from_millis(100)) {
+            heard.insert(sample.channel);
+        }
+    }
 }

@@ -4,7 +4,6 @@
 use std::sync::Arc;
 
 use dsr::{Delta, Replica};
-use transport::Channel;
 
 use super::{AgentCore, Caches, Dest, Event, MAX_ANSWERED, Output};
 use crate::AgentId;
@@ -13,6 +12,9 @@ use crate::graph_id::GraphId;
 
 impl AgentCore {
     pub(super) fn answer_graph_request(&mut self, from: AgentId, nonce: u64, now_ns: u64, out: &mut Output) {
+        if self.config.read_only {
+            return; // It may not publish answers; a writer of the graph answers.
+        }
         let recent =
             self.answered.get(&(from, nonce)).is_some_and(|at| now_ns.saturating_sub(*at) < self.config.answer_hold_ns);
         if recent {
@@ -25,7 +27,7 @@ impl AgentCore {
         }
         out.events.push(Event::Answered { to: from, snapshot_bytes: snapshot.len(), from_cache });
         let answer = Message::GraphAnswer { from: self.config.id, to: from, nonce, snapshot };
-        out.send(Channel::Sync, answer, Dest::Sender);
+        out.send(answer, Dest::Sender);
     }
 
     /// Creates this life's replica from a graph answer (or alone, from the seed), then applies what was buffered

@@ -112,6 +112,16 @@ pub enum Event {
     },
     /// No incarnation is left for a new life (more than 2^20 lives of this agent id).
     IncarnationsExhausted,
+    /// A message that does not ask arrived on [`Channel::Requests`] (where only asking travels, see
+    /// [`Message::asks`]) and was refused, never applied; counted in [`super::AgentCore::misrouted_refused`].
+    Misrouted {
+        /// The sender it names.
+        from: AgentId,
+        /// The message's kind.
+        kind: &'static str,
+        /// Whether it is the first refused so (the shell warns once, then counts).
+        first: bool,
+    },
     /// A message of another graph was refused (reported once per foreign graph id; later ones are only counted,
     /// see [`super::AgentCore::foreign_refused`]).
     ForeignGraph {
@@ -138,9 +148,10 @@ pub struct Output {
 }
 
 impl Output {
-    /// Queues a message; its graph id is stamped by [`Output::stamp`] when the core returns.
-    pub(super) fn send(&mut self, channel: Channel, message: Message, dest: Dest) {
-        self.sends.push(Send { channel, message, dest, graph: None, sample: None });
+    /// Queues a message on its channel ([`Message::channel`]); its graph id is stamped by [`Output::stamp`] when the
+    /// core returns.
+    pub(super) fn send(&mut self, message: Message, dest: Dest) {
+        self.sends.push(Send { channel: message.channel(), message, dest, graph: None, sample: None });
     }
 
     /// Stamps every queued message with the sender's graph.
@@ -196,4 +207,6 @@ pub enum WriteRefusal {
     Collision(String),
     /// The replica refused the operation.
     Op(OpError),
+    /// The agent is read-only ([`super::ProtocolConfig::read_only`]): it never changes the graph.
+    ReadOnly,
 }

@@ -49,6 +49,11 @@ pub struct ProtocolConfig {
     /// may still be on its way), one after it does (the answer may have been lost). A joiner whose answer was lost
     /// is served again only after this, so its join wait must be longer than this plus a join retry.
     pub answer_hold_ns: u64,
+    /// A read-only life (an inspector whose credentials let it publish requests alone): it asks — graph requests,
+    /// missing-requests — and never publishes anything else. It never starts alone (it asks until an agent of the
+    /// graph answers), never announces (a peer could ask it for operations it cannot send), answers no request, and
+    /// refuses local writes ([`super::WriteRefusal::ReadOnly`]).
+    pub read_only: bool,
     /// A planted protocol bug (always none without the `mutants` feature).
     pub plant: Plant,
 }

@@ -5,7 +5,6 @@ use std::sync::Arc;
 
 use bytes::Bytes;
 use dsr::{CausalContext, Delta, Missing};
-use transport::Channel;
 
 use super::{AgentCore, Dest, Event, Output, SNAPSHOT_IF_SMALLER_ABOVE_BYTES};
 use crate::AgentId;
@@ -36,7 +35,7 @@ impl AgentCore {
         let Some(replica) = &self.replica else { return };
         let request =
             Message::MissingRequest { from: self.config.id, to: peer, applied: replica.applied().clone(), full };
-        out.send(Channel::Sync, request, Dest::All);
+        out.send(request, Dest::All);
         self.pending_ask = Some((peer, now_ns));
     }
 
@@ -81,6 +80,9 @@ impl AgentCore {
     }
 
     pub(super) fn answer_missing(&mut self, from: AgentId, applied: &CausalContext, full: bool, out: &mut Output) {
+        if self.config.read_only {
+            return; // It may not publish answers; a writer of the graph answers.
+        }
         let missing = match &self.replica {
             Some(replica) if !full => replica.missing_for(applied),
             _ => Missing::UpToDate,
@@ -103,7 +105,7 @@ impl AgentCore {
             Missing::Snapshot => self.snapshot_bytes(),
         };
         if let Some((snapshot, _)) = snapshot {
-            out.send(Channel::Sync, Message::Snapshot { from: self.config.id, to: from, snapshot }, Dest::Sender);
+            out.send(Message::Snapshot { from: self.config.id, to: from, snapshot }, Dest::Sender);
         }
     }
 
@@ -138,18 +140,14 @@ impl AgentCore {
         for delta in deltas {
             let encoded = Bytes::from(delta.encode());
             if !batch.is_empty() && (bytes + encoded.len() > self.config.max_batch_bytes || batch.len() >= MAX_BATCH) {
-                out.send(
-                    Channel::Sync,
-                    Message::Deltas { from: me, to, deltas: std::mem::take(&mut batch) },
-                    Dest::Sender,
-                );
+                out.send(Message::Deltas { from: me, to, deltas: std::mem::take(&mut batch) }, Dest::Sender);
                 bytes = 0;
             }
             bytes += encoded.len();
             batch.push(encoded);
         }
         if !batch.is_empty() {
-            out.send(Channel::Sync, Message::Deltas { from: me, to, deltas: batch }, Dest::Sender);
+            out.send(Message::Deltas { from: me, to, deltas: batch }, Dest::Sender);
         }
     }
 }

@@ -260,7 +260,7 @@ pub fn reader(domain: u16, prefix: &str, multicast: Multicast) -> anyhow::Result
                         expected = Some((total, Instant::now()));
                     }
                 }
-                Channel::Sync => {}
+                Channel::Sync | Channel::Requests => {}
             }
         } else if last_heard.elapsed() > Duration::from_secs(60) {
             return Ok(());

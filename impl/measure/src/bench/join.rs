@@ -50,7 +50,8 @@ pub struct JoinChildReport {
     pub participant_ns: u64,
     /// The first remote participant was discovered.
     pub peer_discovered_ns: Option<u64>,
-    /// The helper's sync writer matched a remote reader (its graph request can be heard).
+    /// The helper's requests writer matched a remote reader (its graph request, on `Channel::Requests`, can be
+    /// heard).
     pub sync_writer_matched_ns: Option<u64>,
     /// The helper's sync reader matched a remote writer (the answer can reach it).
     pub sync_reader_matched_ns: Option<u64>,
@@ -257,7 +258,7 @@ pub fn child(
         main_ns,
         participant_ns,
         peer_discovered_ns: discovery.first_participant_ns,
-        sync_writer_matched_ns: discovery.writer_matched_ns[sync],
+        sync_writer_matched_ns: discovery.writer_matched_ns[Channel::Requests.index()],
         sync_reader_matched_ns: discovery.reader_matched_ns[sync],
         join_requests: status.join.requests,
         first_request_ns: status.join.first_request_ns,

@@ -12,6 +12,9 @@ use rustdds::{DomainParticipantStatusEvent, DomainParticipantStatusListener, GUI
 use crate::Transport;
 use crate::{Channel, Clock, EndpointId, SystemClock};
 
+/// Per-channel values, by [`Channel::index`].
+type PerChannel<T> = [T; Channel::COUNT];
+
 /// When discovery reached each step, in wall-clock nanoseconds since the Unix epoch ([`SystemClock`], so times of
 /// different processes on one host compare); `None` until it happens.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -21,9 +24,9 @@ pub struct DiscoveryTimes {
     /// The first remote participant was discovered.
     pub first_participant_ns: Option<u64>,
     /// Per channel (by [`Channel::index`]): this participant's writer matched its first remote reader.
-    pub writer_matched_ns: [Option<u64>; 3],
+    pub writer_matched_ns: PerChannel<Option<u64>>,
     /// Per channel (by [`Channel::index`]): this participant's reader matched its first remote writer.
-    pub reader_matched_ns: [Option<u64>; 3],
+    pub reader_matched_ns: PerChannel<Option<u64>>,
 }
 
 /// Most remote readers remembered per channel for directed writes; past it, [`Transport::publish_to`] of an
@@ -41,9 +44,10 @@ pub(super) fn prefix_of(guid: GUID) -> Prefix {
     prefix
 }
 
-/// First 8 bytes of a transport's own control sample on the `Sync` topic, which tells peers the GUID prefix of
-/// its readers' participant (12 bytes follow). Samples are tagged with the writing participant's prefix, and the
-/// readers live in another participant, so without it a peer could not address this transport's reader alone.
+/// First 8 bytes of a transport's own control sample on the `Requests` topic (the one every transport, a read-only
+/// one too, writes, and the one asking is done on), which tells peers the GUID prefix of its readers' participant
+/// (12 bytes follow). Samples are tagged with the writing participant's prefix, and the readers live in another
+/// participant, so without it a peer could not address an answer to this transport's reader alone.
 /// The receiving thread consumes these samples; they never reach the inbox.
 pub(super) const READERS_AT: [u8; 8] = *b"\xffRTPSrd1";
 
@@ -53,10 +57,10 @@ pub(super) struct DiscoveryState {
     pub(super) times: Mutex<DiscoveryTimes>,
     pub(super) sync_matches: AtomicU64,
     /// The remote readers each channel's writer has matched (by [`Channel::index`]), for directed writes.
-    pub(super) readers: Mutex<[Vec<GUID>; 3]>,
+    pub(super) readers: Mutex<PerChannel<Vec<GUID>>>,
     /// Peers' readers' participants, learnt from their [`READERS_AT`] samples (bounded).
     pub(super) reading_prefixes: Mutex<Vec<(EndpointId, Prefix)>>,
-    /// A new remote reader matched this transport's sync writer: tell it where this transport's readers are,
+    /// A new remote reader matched this transport's requests writer: tell it where this transport's readers are,
     /// before the next sample this transport publishes.
     pub(super) announce_pending: AtomicBool,
 }
@@ -108,7 +112,8 @@ pub(super) struct DiscoveryWatch {
     /// The GUID prefixes of this transport's participants: rustdds also matches a transport's writers with its own
     /// readers (in the same participant or the other), which is no peer.
     pub(super) own: Vec<Prefix>,
-    pub(super) endpoints: Vec<(Channel, GUID, GUID)>,
+    /// Per channel: the local writer (none for a channel a read-only transport does not write) and reader.
+    pub(super) endpoints: Vec<(Channel, Option<GUID>, GUID)>,
     pub(super) state: Arc<DiscoveryState>,
 }
 
@@ -134,15 +139,17 @@ impl DiscoveryWatch {
                 DomainParticipantStatusEvent::RemoteReaderMatched { local_writer, remote_reader }
                     if !self.own.contains(&prefix_of(remote_reader)) =>
                 {
-                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, w, _)| *w == local_writer) {
+                    if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, w, _)| *w == Some(local_writer)) {
                         times.writer_matched_ns[channel.index()].get_or_insert(now);
                         let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
                         let known = &mut readers[channel.index()];
                         if !known.contains(&remote_reader) && known.len() < MAX_REMEMBERED_READERS {
                             known.push(remote_reader);
                         }
-                        if *channel == Channel::Sync {
+                        if matches!(channel, Channel::Sync | Channel::Requests) {
                             self.state.sync_matches.fetch_add(1, Ordering::Release);
+                        }
+                        if *channel == Channel::Requests {
                             self.state.announce_pending.store(true, Ordering::Release);
                         }
                     }
@@ -152,7 +159,7 @@ impl DiscoveryWatch {
                 {
                     if let Some((channel, _, _)) = self.endpoints.iter().find(|(_, _, r)| *r == local_reader) {
                         times.reader_matched_ns[channel.index()].get_or_insert(now);
-                        if *channel == Channel::Sync {
+                        if matches!(channel, Channel::Sync | Channel::Requests) {
                             self.state.sync_matches.fetch_add(1, Ordering::Release);
                         }
                     }

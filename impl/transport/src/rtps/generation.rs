@@ -24,7 +24,8 @@ pub(super) struct Participants {
 /// A full set of DDS entities, as [`Generation::build`] makes them: at start, and at every rebuild.
 /// Fields drop in order: the writers and readers before the participants.
 pub(super) struct Generation {
-    pub(super) writers: Vec<Writer>,
+    /// One writer per channel (by [`Channel::index`]); `None` for a channel a read-only transport does not write.
+    pub(super) writers: Vec<Option<Writer>>,
     pub(super) best_effort: Option<Writer>,
     pub(super) reading: Reading,
     pub(super) local: EndpointId,
@@ -90,9 +91,18 @@ impl Generation {
         for channel in Channel::ALL {
             let name = format!("{}_{}", config.topic_prefix, channel.name());
             let (written, read) = topics(&name, &qos)?;
-            let writer = writer(&written, &name, &qos)?;
             let reader = reader(&read, &name, &qos)?;
-            endpoints.push((channel, writer.guid(), reader.guid()));
+            // A read-only transport writes requests alone (its permissions may grant nothing else).
+            let writer = if config.read_only && channel != Channel::Requests {
+                None
+            } else {
+                let writer = writer(&written, &name, &qos)?;
+                endpoints.push((channel, Some(writer.guid()), reader.guid()));
+                Some(writer)
+            };
+            if writer.is_none() {
+                endpoints.push((channel, None, reader.guid()));
+            }
             writers.push(writer);
             readers.push((channel, reader));
         }
@@ -107,7 +117,7 @@ impl Generation {
                 None => None,
                 Some(_) => {
                     let writer = writer(&written, &name, &qos)?;
-                    endpoints.push((Channel::Updates, writer.guid(), reader.guid()));
+                    endpoints.push((Channel::Updates, Some(writer.guid()), reader.guid()));
                     Some(writer)
                 }
             };

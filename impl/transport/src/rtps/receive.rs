@@ -156,7 +156,7 @@ fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool) -> Ended {
                             continue;
                         }
                         let Payload(bytes) = change.into_value();
-                        if *channel == Channel::Sync && watch.state.learn_reading_prefix(origin, &bytes) {
+                        if *channel == Channel::Requests && watch.state.learn_reading_prefix(origin, &bytes) {
                             continue;
                         }
                         if !outlet.pass(Sample { channel: *channel, origin, bytes }, stop) {
@@ -223,7 +223,7 @@ impl Rebuild {
         let Generation { writers, best_effort, local, reading_prefix, participants, reading } = generation;
         let mut old = Vec::new();
         for (slot, writer) in self.shared.writers.iter().zip(writers) {
-            old.push(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
+            old.extend(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
         }
         if let (Some((slot, _)), Some(writer)) = (&self.shared.best_effort, best_effort) {
             old.push(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));

@@ -87,6 +87,10 @@ pub struct RtpsConfig {
     /// DDS Security credentials: every participant of the transport authenticates with them and follows the
     /// signed governance and permissions (needs the crate's `security` feature). `None`: no DDS Security.
     pub security: Option<SecurityFiles>,
+    /// Create a writer for [`Channel::Requests`] alone, and readers for every channel: a participant whose
+    /// permissions let it publish on the requests topic only (a read-only inspector) can then start, and
+    /// publishing on another channel is refused with [`crate::TransportError::ReadOnly`].
+    pub read_only: bool,
 }
 
 /// One participant's DDS Security credentials (OMG DDS Security 1.1 builtin plugins, as `rustdds` reads them): a
@@ -150,12 +154,16 @@ impl Default for RtpsConfig {
             multicast: Multicast::Auto,
             updates: UpdateDelivery::Reliable,
             security: None,
+            read_only: false,
         }
     }
 }
 
-/// The largest best-effort sample of `config`, if its updates go best-effort.
+/// The largest best-effort sample of `config`, if its updates go best-effort (never for a read-only transport).
 pub(super) fn best_effort_max_bytes(config: &RtpsConfig) -> Option<usize> {
+    if config.read_only {
+        return None;
+    }
     match config.updates {
         UpdateDelivery::Reliable => None,
         UpdateDelivery::BestEffort { max_bytes } => Some(max_bytes),

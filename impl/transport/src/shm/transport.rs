@@ -18,7 +18,7 @@ use crate::{Channel, Counters, EndpointId, Sample, Transport, TransportError, Tr
 /// A transport over shared memory between the endpoints of one host (see the module documentation).
 pub struct ShmTransport {
     id: EndpointId,
-    lanes: [ShmLane; 3],
+    lanes: [ShmLane; Channel::COUNT],
     notifier: iceoryx2::port::notifier::Notifier<ipc_threadsafe::Service>,
     listener: Mutex<iceoryx2::port::listener::Listener<ipc_threadsafe::Service>>,
     /// The lane `try_recv` looks at first, so no channel starves the others.
@@ -35,8 +35,8 @@ impl std::fmt::Debug for ShmTransport {
 }
 
 impl ShmTransport {
-    /// Opens the lanes `PREFIX/updates`, `PREFIX/sync`, `PREFIX/calls` and the wake-up event `PREFIX/wake` for the
-    /// endpoint `id`.
+    /// Opens the lanes `PREFIX/updates`, `PREFIX/sync`, `PREFIX/calls`, `PREFIX/requests` and the wake-up event
+    /// `PREFIX/wake` for the endpoint `id`.
     ///
     /// # Errors
     /// As [`ShmLane::open`]: shared memory unusable, a name refused, or a service of another shape.
@@ -58,7 +58,7 @@ impl ShmTransport {
             tracing::info!(cleaned = cleaned.cleanups, failed = cleaned.failed_cleanups, "dead iceoryx2 nodes");
         }
         let lane = |channel: Channel| ShmLane::open(&format!("{prefix}/{}", channel.name()), id, settings);
-        let lanes = [lane(Channel::Updates)?, lane(Channel::Sync)?, lane(Channel::Calls)?];
+        let lanes = [lane(Channel::Updates)?, lane(Channel::Sync)?, lane(Channel::Calls)?, lane(Channel::Requests)?];
         let events = node
             .service_builder(&name)
             .event()
@@ -160,17 +160,17 @@ mod tests {
         for channel in Channel::ALL {
             a.publish(channel, Bytes::from(vec![channel.index() as u8; 100])).expect("publish");
         }
-        let mut got: Vec<Sample> = (0..3).filter_map(|_| b.recv_timeout(Duration::from_secs(5))).collect();
+        let mut got: Vec<Sample> = (0..Channel::COUNT).filter_map(|_| b.recv_timeout(Duration::from_secs(5))).collect();
         got.sort_by_key(|s| s.channel.index());
-        assert_eq!(got.len(), 3);
+        assert_eq!(got.len(), Channel::COUNT);
         for (sample, channel) in got.iter().zip(Channel::ALL) {
             assert_eq!(sample.channel, channel);
             assert_eq!(sample.origin, EndpointId(10));
             assert_eq!(sample.bytes.as_ref(), &[channel.index() as u8; 100][..]);
         }
         assert_eq!(a.try_recv(), None, "an endpoint never receives its own samples");
-        assert_eq!(b.stats().samples_received, 3);
-        assert_eq!(a.stats().samples_sent, 3);
+        assert_eq!(b.stats().samples_received, Channel::COUNT as u64);
+        assert_eq!(a.stats().samples_sent, Channel::COUNT as u64);
     }
 
     #[test]
