@@ -223,6 +223,9 @@ impl WireContext {
     }
 }
 
+/// An announce's fields on the wire: from, nonce, replica, applied operations, digest of a still graph.
+type WireAnnounce = (u32, u64, u32, WireContext, Option<[u8; 32]>);
+
 /// A byte slice that postcard writes as one length-prefixed block (not byte by byte).
 struct Block<'a>(&'a [u8]);
 
@@ -436,10 +439,8 @@ impl Message {
                 Message::Delta { from: AgentId(from), delta: tail(rest) }
             }
             K_ANNOUNCE => {
-                let ((from, nonce, replica, context, digest), rest): (
-                    (u32, u64, u32, WireContext, Option<[u8; 32]>),
-                    _,
-                ) = postcard::take_from_bytes(body).map_err(take)?;
+                let ((from, nonce, replica, context, digest), rest): (WireAnnounce, _) =
+                    postcard::take_from_bytes(body).map_err(take)?;
                 whole(rest)?;
                 if replica == 0 {
                     return Err(malformed("replica id 0".into()));
