@@ -122,7 +122,7 @@ pub fn revoke(args: &RevokeArgs) -> Result<Vec<String>> {
     let dir = &args.dir;
     let ca_dir = dir.join("ca");
     if !ca_dir.join(pki::CA_CERT).is_file() {
-        bail!("{}: no PKI of `cortex security init` here ({} is missing)", dir.display(), pki::CA_CERT);
+        bail!("{}: no PKI of `cortex security init` here (ca/{} is missing)", dir.display(), pki::CA_CERT);
     }
     let governance_path = ca_dir.join("governance.xml");
     let governance_xml = std::fs::read_to_string(&governance_path)
@@ -236,7 +236,7 @@ pub(super) fn check_not_revoked(dir: &Path) -> Result<()> {
     if marker.exists() {
         let text = std::fs::read(&marker).map(|bytes| String::from_utf8_lossy(&bytes).into_owned()).unwrap_or_default();
         let said = text.lines().next().map(str::trim).filter(|line| !line.is_empty()).unwrap_or("revoked");
-        bail!("{}: these credentials were revoked — {said}", marker.display());
+        bail!("{}: these credentials were {said}", marker.display());
     }
     Ok(())
 }
