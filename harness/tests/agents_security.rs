@@ -3,7 +3,9 @@
 //! whose identity another CA signed, one whose permissions only let it read, one whose credentials expired —
 //! while the three agents' digests stay what they were. A reader (`--readers`: publish on the requests topic
 //! alone) joins a secured graph read-only and sees what the writers see, cannot create a writer of updates, and a
-//! delta it publishes on the requests topic is refused by every agent.
+//! delta it publishes on the requests topic is refused by every agent. A participant revoked by
+//! `cortex security revoke` (the CA rotated) is refused at start, and with its old credentials copied elsewhere (no
+//! marker, so no local check stops it) it neither gets the re-issued agents' graph nor changes it.
 
 mod common;
 
@@ -253,4 +255,80 @@ fn a_reader_joins_a_secured_graph_read_only_and_nothing_it_publishes_changes_it(
         assert!(!status.peers.contains(&9), "agent {} took the forger for a peer: {status:?}", agent.id);
     }
     let _ = std::fs::remove_dir_all(pki);
+}
+
+/// `cortex security ARGS...`: its exit status, standard output and standard error.
+fn security(args: &[&str]) -> (bool, String, String) {
+    let output = Command::new(env!("CARGO_BIN_EXE_cortex")).arg("security").args(args).output().expect("cortex runs");
+    let text = |bytes: &[u8]| String::from_utf8_lossy(bytes).into_owned();
+    (output.status.success(), text(&output.stdout), text(&output.stderr))
+}
+
+#[test]
+fn a_revoked_participant_is_refused_at_start_and_with_its_old_credentials_reaches_nobody() {
+    let domain = 86;
+    let prefix = format!("revoked{}", std::process::id());
+    let (pki, elsewhere) = (scratch("pki-revoke"), scratch("pki-revoked-copy"));
+    pki_init(&pki, &["--agents", "a1,a2,a3"]);
+    let credentials = |name: &str| pki.join(name).to_str().unwrap().to_owned();
+    let (c1, c2, c3) = (credentials("a1"), credentials("a2"), credentials("a3"));
+
+    let (revoked, said, _) = security(&["revoke", pki.to_str().unwrap(), "a3"]);
+    assert!(revoked && said.contains("REVOKED") && said.contains("Restart every running agent"), "{said}");
+    let (again, _, error) = security(&["revoke", pki.to_str().unwrap(), "a3"]);
+    assert!(!again && error.contains("already revoked"), "{error}");
+    let (unknown, _, error) = security(&["revoke", pki.to_str().unwrap(), "a9"]);
+    assert!(!unknown && error.contains("no participant \"a9\""), "{error}");
+    // The re-issued credentials pass the check; the revoked are refused, by the check and by `cortex agent`, with
+    // the marker named and its date.
+    assert!(security(&["check", &c1]).0);
+    let (checked, _, error) = security(&["check", &c3]);
+    assert!(
+        !checked && error.contains("REVOKED") && error.contains("were revoked") && error.contains("UTC"),
+        "{error}"
+    );
+    let at_start =
+        refused(&["--id", "3", "--domain", "86", "--topic-prefix", &prefix, "--graph-id", GRAPH, "--security", &c3]);
+    assert!(at_start.contains("REVOKED") && at_start.contains("revoked 20"), "{at_start}");
+
+    // The revoked credentials copied elsewhere without the marker pass every local check: only the peers stop them.
+    let old = elsewhere.join("a3");
+    std::fs::create_dir_all(&old).unwrap();
+    for entry in std::fs::read_dir(&c3).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_name() != "REVOKED" {
+            std::fs::copy(entry.path(), old.join(entry.file_name())).unwrap();
+        }
+    }
+    let old = old.to_str().unwrap().to_owned();
+    assert!(security(&["check", &old]).0);
+
+    let nodes = seed_nodes();
+    let seed = seed_path();
+    let first =
+        ["--graph-id", GRAPH, "--security", &c1, "--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"];
+    let mut a1 = spawn(1, domain, &prefix, &first);
+    a1.wait_ready_with(nodes);
+    let second = ["--graph-id", GRAPH, "--security", &c2, "--insert-nodes", "4"];
+    let mut a2 = common::join(2, domain, &prefix, &second, nodes);
+    converge(&mut [&mut a1, &mut a2], nodes + 4);
+    let before = snapshot(&mut [&mut a1, &mut a2]);
+
+    // The revoked participant, with its old credentials, naming the graph and writing: it is not authenticated, so
+    // it starts alone with its own nodes, and its writes reach neither agent.
+    let outcast = ["--graph-id", GRAPH, "--security", &old, "--join-wait-ms", "1500", "--insert-nodes", "3"];
+    let mut a3 = spawn(3, domain, &prefix, &outcast);
+    a3.wait_for("ready alone with its 3 nodes", Duration::from_secs(30), |s| s.ready && s.nodes == 3, |_| false);
+    // Several announce periods (500 ms) later, nothing of its has reached the graph, nor the graph it.
+    std::thread::sleep(Duration::from_secs(4));
+    assert_eq!(snapshot(&mut [&mut a1, &mut a2]), before);
+    for agent in [&mut a1, &mut a2] {
+        let status = agent.latest().cloned().unwrap();
+        assert!(!status.peers.contains(&3), "agent {} heard the revoked a3: {:?}", agent.id, status.peers);
+    }
+    let status = a3.latest().cloned().unwrap();
+    assert!(status.peers.is_empty() && status.nodes == 3, "the revoked a3 reached the graph: {status:?}");
+    assert_ne!(status.digest, before[0].1);
+    let _ = std::fs::remove_dir_all(pki);
+    let _ = std::fs::remove_dir_all(elsewhere);
 }
