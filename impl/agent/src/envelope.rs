@@ -36,8 +36,9 @@ pub enum CallFault {
 
 /// First byte of every envelope: a foreign sample on our topics is recognised at once.
 pub const MAGIC: u8 = 0xD5;
-/// The envelope version this build writes and reads (2: the graph id in the header).
-pub const VERSION: u8 = 2;
+/// The envelope version this build writes and reads (2: the graph id in the header; 3: an announce's digest is
+/// optional, and asking goes on the requests channel).
+pub const VERSION: u8 = 3;
 /// Bytes of the header: magic, version, kind, graph id.
 pub const HEADER_BYTES: usize = 11;
 /// Most version-vector entries in a carried context.
