@@ -46,9 +46,14 @@ pub struct PayloadArgs {
     /// The paths, in the order the table shows them.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = default_paths())]
     pub paths: Vec<PathArg>,
-    /// Measured samples per size, receivers and path (after 3 warm-up samples).
+    /// Measured samples per size, receivers and path (after the warm-up samples).
     #[arg(long, default_value_t = PayloadPathsExperiment::default().count)]
     pub count: u32,
+    /// Unmeasured samples of each size before the measured ones. Steady state for a large frame takes enough to
+    /// fill a receiver's 64 MiB anti-entropy history (e.g. 20 for 4 MiB); before it, received frames land in heap
+    /// pages never touched before.
+    #[arg(long, default_value_t = PayloadPathsExperiment::default().warmup)]
+    pub warmup: u32,
     /// Samples per second.
     #[arg(long, default_value_t = PayloadPathsExperiment::default().rate_hz)]
     pub rate_hz: f64,
@@ -89,6 +94,7 @@ pub(super) fn run(args: PayloadArgs) -> Result<()> {
         paths: args.paths.iter().map(|p| p.0).collect(),
         count: args.count,
         rate_hz: args.rate_hz,
+        warmup: args.warmup,
     };
     experiment.validate()?;
     let Some(counting) = enter_netns(args.netns, NetnsSetup { multicast: true })? else { return Ok(()) };

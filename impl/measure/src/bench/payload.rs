@@ -12,8 +12,8 @@
 //! **Latency** is one way ([`crate::results::PAYLOAD_PATHS_LATENCY`]): the writer stamps each sample just before
 //! it writes it, each receiver stamps its delivery, both on the wall clock of this host, and the difference is the
 //! latency of that delivery. For each number of receivers and each path the receivers are started once and every
-//! size goes through them in turn: probes (each receiver answers one, so discovery and the join are done), a few
-//! unmeasured warm-up samples, then `count` samples at `rate_hz`, the last of which every receiver answers before
+//! size goes through them in turn: probes (each receiver answers one, so discovery and the join are done),
+//! `warmup` unmeasured samples, then `count` samples at `rate_hz`, the last of which every receiver answers before
 //! the window closes. **CPU** per receiver process and **loopback bytes** are read at the window's edges (the
 //! receivers' `/proc/PID/task/*/schedstat`; the loopback counters in a fresh network namespace, [`Counting`]), so
 //! they cover the samples of that size and the receivers' answers to the last. A delivery that never comes is
@@ -40,8 +40,6 @@ use crate::results::{PayloadCell, PayloadPathsResult};
 use crate::spec::{PayloadPath, PayloadPathsExperiment};
 use crate::usage::process_cpu_ns_of;
 
-/// Unmeasured samples of each size after the probes.
-const WARMUP_SAMPLES: u32 = 3;
 /// How long the loopback must stay quiet after a session that used it ([`settle`]).
 const QUIET: Duration = Duration::from_millis(1_500);
 /// The longest wait for that quiet.

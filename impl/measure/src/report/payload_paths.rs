@@ -26,8 +26,9 @@ fn write(md: &mut String, r: &Results, _: &Context<'_>) {
          node, and each receiver process runs its own agent over the same link (`cortex agent --transport`). Raw \
          iceoryx2 (`transport::shm::limit`): the sample copied once into a loaned chunk and read in place by each \
          receiver, no agent — the same-host limit; memcpy: one copy of the size in this process. Every size goes \
-         through the same receivers in turn, after probes and 3 warm-up samples.\n",
-        paths.join(", ")
+         through the same receivers in turn, after probes and {} warm-up samples.\n",
+        paths.join(", "),
+        result.experiment.warmup
     );
     let _ = writeln!(md, "{}.\n", table::heading(result));
     md.push_str(&table::markdown(result));

@@ -106,10 +106,23 @@ pub struct PayloadPathsExperiment {
     pub receivers: Vec<u32>,
     /// The paths, in the order tables show them.
     pub paths: Vec<PayloadPath>,
-    /// Measured samples per size, receivers and path (after a few warm-up samples).
+    /// Measured samples per size, receivers and path (after `warmup` unmeasured ones).
     pub count: u32,
     /// Samples per second.
     pub rate_hz: f64,
+    /// Unmeasured samples of each size before the measured ones, after the probes. A few settle discovery and the
+    /// first allocations; steady state for a large frame takes enough to fill a receiver's anti-entropy history
+    /// (`dsr::LogLimits::max_payload_bytes`, 64 MiB: 16 frames of 4 MiB), before which every received frame lands
+    /// in heap pages never touched before.
+    #[serde(default = "default_warmup")]
+    pub warmup: u32,
+}
+
+/// The default of [`PayloadPathsExperiment::warmup`].
+pub const DEFAULT_PAYLOAD_PATH_WARMUP: u32 = 3;
+
+fn default_warmup() -> u32 {
+    DEFAULT_PAYLOAD_PATH_WARMUP
 }
 
 impl Default for PayloadPathsExperiment {
@@ -122,6 +135,7 @@ impl Default for PayloadPathsExperiment {
             paths: PayloadPath::all(),
             count: 40,
             rate_hz: 20.0,
+            warmup: DEFAULT_PAYLOAD_PATH_WARMUP,
         }
     }
 }
@@ -132,7 +146,7 @@ impl PayloadPathsExperiment {
     /// # Errors
     /// No size, receiver count or path; a size below 8 bytes or above [`MAX_PAYLOAD_PATH_BYTES`]; a receiver
     /// count of 0 or above [`MAX_PAYLOAD_PATH_RECEIVERS`]; a path named twice; a count of 0 or above
-    /// [`MAX_PAYLOAD_PATH_COUNT`]; a rate that is not positive and finite.
+    /// [`MAX_PAYLOAD_PATH_COUNT`]; a warm-up above [`MAX_PAYLOAD_PATH_COUNT`]; a rate that is not positive and finite.
     pub fn validate(&self) -> anyhow::Result<()> {
         anyhow::ensure!(!self.sizes.is_empty(), "payload paths: no size");
         anyhow::ensure!(!self.receivers.is_empty(), "payload paths: no number of receivers");
@@ -150,6 +164,11 @@ impl PayloadPathsExperiment {
             (1..=MAX_PAYLOAD_PATH_COUNT).contains(&self.count),
             "payload paths: a count of {} (1 to {MAX_PAYLOAD_PATH_COUNT})",
             self.count
+        );
+        anyhow::ensure!(
+            self.warmup <= MAX_PAYLOAD_PATH_COUNT,
+            "payload paths: a warm-up of {} samples (at most {MAX_PAYLOAD_PATH_COUNT})",
+            self.warmup
         );
         anyhow::ensure!(
             self.rate_hz.is_finite() && self.rate_hz > 0.0,
@@ -190,6 +209,7 @@ mod tests {
         assert_eq!(good.cells(), 6 * (4 * 3 + 1));
         let broken = [
             PayloadPathsExperiment { sizes: vec![], ..good.clone() },
+            PayloadPathsExperiment { warmup: MAX_PAYLOAD_PATH_COUNT + 1, ..good.clone() },
             PayloadPathsExperiment { sizes: vec![7], ..good.clone() },
             PayloadPathsExperiment { sizes: vec![MAX_PAYLOAD_PATH_BYTES + 1], ..good.clone() },
             PayloadPathsExperiment { receivers: vec![0], ..good.clone() },

@@ -17,7 +17,7 @@ use dsr::{Change, Element, NewNode, NodeId, attrs};
 use transport::rtps::RtpsConfig;
 use transport::{Clock as _, SystemClock};
 
-use super::{Counting, Mark, ReceiverReport, WARMUP_SAMPLES, Window, collect_reports, paced, spawn_receivers};
+use super::{Counting, Mark, ReceiverReport, Window, collect_reports, paced, spawn_receivers};
 use crate::bench::{helper, payload_of, seq_of};
 use crate::latency;
 use crate::results::PayloadCell;
@@ -135,7 +135,7 @@ pub(super) fn session(
     let mut windows = Vec::new();
     for &size in &experiment.sizes {
         writer.probe(size)?;
-        paced(WARMUP_SAMPLES, experiment.rate_hz, |_| writer.write(size, PROBE).map(drop))?;
+        paced(experiment.warmup, experiment.rate_hz, |_| writer.write(size, PROBE).map(drop))?;
         let start = Mark::now(counting, &pids)?;
         let mut written = Vec::with_capacity(experiment.count as usize);
         paced(experiment.count, experiment.rate_hz, |i| {

@@ -9,7 +9,7 @@ use anyhow::{Context as _, ensure};
 use transport::SystemClock;
 use transport::shm::limit::{self, LimitSender, Wake};
 
-use super::{Counting, Mark, WARMUP_SAMPLES, Window, paced, spawn_receivers};
+use super::{Counting, Mark, Window, paced, spawn_receivers};
 use crate::bench::helper;
 use crate::latency;
 use crate::results::PayloadCell;
@@ -44,7 +44,7 @@ pub(super) fn session(
             round += 1;
             sender.round(round, sample, &SystemClock, ROUND_TIMEOUT)
         };
-        paced(WARMUP_SAMPLES, experiment.rate_hz, |_| Ok(send(&mut sample).map(drop)?))?;
+        paced(experiment.warmup, experiment.rate_hz, |_| Ok(send(&mut sample).map(drop)?))?;
         let start = Mark::now(counting, &pids)?;
         let mut latencies = latency::histogram();
         paced(experiment.count, experiment.rate_hz, |_| {
