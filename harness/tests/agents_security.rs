@@ -157,6 +157,21 @@ fn secured_transport(dir: &Path, domain: u16, prefix: &str, read_only: bool) -> 
     })
 }
 
+/// Agent 1 seeded from the bundled graph with credentials `c1`, and agent 2 joining with `c2` and inserting 4 nodes,
+/// converged on graph [`GRAPH`]; returns both and their digests.
+fn two_writers(domain: u16, prefix: &str, c1: &str, c2: &str) -> (Agent, Agent, Vec<(usize, Option<String>)>) {
+    let nodes = seed_nodes();
+    let seed = seed_path();
+    let first = ["--graph-id", GRAPH, "--security", c1, "--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"];
+    let mut a1 = spawn(1, domain, prefix, &first);
+    a1.wait_ready_with(nodes);
+    let second = ["--graph-id", GRAPH, "--security", c2, "--insert-nodes", "4"];
+    let mut a2 = common::join(2, domain, prefix, &second, nodes);
+    converge(&mut [&mut a1, &mut a2], nodes + 4);
+    let before = snapshot(&mut [&mut a1, &mut a2]);
+    (a1, a2, before)
+}
+
 #[test]
 fn a_reader_joins_a_secured_graph_read_only_and_nothing_it_publishes_changes_it() {
     let domain = 87;
@@ -165,16 +180,8 @@ fn a_reader_joins_a_secured_graph_read_only_and_nothing_it_publishes_changes_it(
     pki_init(&pki, &["--agents", "agent1,agent2,agent3", "--readers", "inspector"]);
     let credentials = |name: &str| pki.join(name).to_str().unwrap().to_owned();
     let nodes = seed_nodes();
-    let seed = seed_path();
-    let (c1, c2, reader) = (credentials("agent1"), credentials("agent2"), credentials("inspector"));
-    let first =
-        ["--graph-id", GRAPH, "--security", &c1, "--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"];
-    let mut a1 = spawn(1, domain, &prefix, &first);
-    a1.wait_ready_with(nodes);
-    let second = ["--graph-id", GRAPH, "--security", &c2, "--insert-nodes", "4"];
-    let mut a2 = common::join(2, domain, &prefix, &second, nodes);
-    converge(&mut [&mut a1, &mut a2], nodes + 4);
-    let before = snapshot(&mut [&mut a1, &mut a2]);
+    let reader = credentials("inspector");
+    let (mut a1, mut a2, before) = two_writers(domain, &prefix, &credentials("agent1"), &credentials("agent2"));
 
     // The reader joins read-only (it asks on the requests topic, the one its permissions let it publish on) and
     // sees the writers' graph: same node count, same digest.
@@ -303,16 +310,7 @@ fn a_revoked_participant_is_refused_at_start_and_with_its_old_credentials_reache
     let old = old.to_str().unwrap().to_owned();
     assert!(security(&["check", &old]).0);
 
-    let nodes = seed_nodes();
-    let seed = seed_path();
-    let first =
-        ["--graph-id", GRAPH, "--security", &c1, "--seed-json", seed.to_str().unwrap(), "--join-wait-ms", "300"];
-    let mut a1 = spawn(1, domain, &prefix, &first);
-    a1.wait_ready_with(nodes);
-    let second = ["--graph-id", GRAPH, "--security", &c2, "--insert-nodes", "4"];
-    let mut a2 = common::join(2, domain, &prefix, &second, nodes);
-    converge(&mut [&mut a1, &mut a2], nodes + 4);
-    let before = snapshot(&mut [&mut a1, &mut a2]);
+    let (mut a1, mut a2, before) = two_writers(domain, &prefix, &c1, &c2);
 
     // The revoked participant, with its old credentials, naming the graph and writing: it is not authenticated, so
     // it starts alone with its own nodes, and its writes reach neither agent.
