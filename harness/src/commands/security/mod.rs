@@ -298,53 +298,93 @@ fn requests_topic(topics: &str) -> String {
 /// updates topic of the graph with topic prefix `topic_prefix` — that is, write the graph. `false` for a reader of
 /// `cortex security init --readers`, which may publish requests alone: it can join only read-only.
 ///
+/// As the builtin access control decides: the first `allow_rule` or `deny_rule` of the grant whose `publish`
+/// topic expressions (fnmatch patterns) match the topic decides, else the grant's `default`. Domain ranges are not
+/// read (`cortex security init` grants every domain).
+///
 /// # Errors
-/// An unreadable permissions file, or one with no grant in it.
+/// An unreadable permissions file, or one with no grant in it, or XML that does not parse.
 pub fn may_write_graph(dir: &Path, topic_prefix: &str) -> Result<bool> {
     let path = dir.join("permissions.p7s");
-    let text = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-    let text = String::from_utf8_lossy(&text);
-    if !text.contains("<grant") {
-        bail!("{}: no permissions grant found", path.display());
-    }
+    let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text = String::from_utf8_lossy(&bytes);
+    // The clear-signed S/MIME message carries the document verbatim between its MIME headers and the signature.
+    let xml = text
+        .find("<dds")
+        .zip(text.rfind("</dds>"))
+        .map(|(from, to)| &text[from..to + "</dds>".len()])
+        .with_context(|| format!("{}: no permissions document (<dds>...</dds>) found", path.display()))?;
     let updates = format!("{topic_prefix}_{}", transport::Channel::Updates.name());
-    let mut rest = text.as_ref();
-    while let Some(section) = between(rest, "<publish>", "</publish>") {
-        let mut topics = section;
-        while let Some(topic) = between(topics, "<topic>", "</topic>") {
-            if glob_matches(topic, &updates) {
-                return Ok(true);
+    let grant = publish_rules(xml).with_context(|| format!("reading the permissions in {}", path.display()))?;
+    let Some(grant) = grant else { bail!("{}: no permissions grant found", path.display()) };
+    let matches = |pattern: &str| glob::Pattern::new(pattern).is_ok_and(|p| p.matches(&updates));
+    let decided = grant.rules.iter().find(|(_, topics)| topics.iter().any(|t| matches(t)));
+    Ok(decided.map_or(grant.default_allows, |(allows, _)| *allows))
+}
+
+/// A grant's publish rules, in order: whether each allows, and its topic expressions; and its default.
+struct PublishGrant {
+    rules: Vec<(bool, Vec<String>)>,
+    default_allows: bool,
+}
+
+/// The publish rules of the first grant in `xml`, or `None` without a grant.
+fn publish_rules(xml: &str) -> Result<Option<PublishGrant>> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_str(xml);
+    reader.config_mut().trim_text(true);
+    let mut path: Vec<String> = Vec::new();
+    let mut grant: Option<PublishGrant> = None;
+    loop {
+        let position = reader.buffer_position();
+        match reader.read_event().with_context(|| format!("XML at byte {position}"))? {
+            Event::Start(start) => {
+                let name = start.local_name().into_inner().to_owned();
+                match name.as_str() {
+                    "grant" if grant.is_none() => {
+                        grant = Some(PublishGrant { rules: Vec::new(), default_allows: false })
+                    }
+                    "allow_rule" | "deny_rule" if directly_under_grant(&path) => {
+                        if let Some(grant) = grant.as_mut() {
+                            grant.rules.push((name == "allow_rule", Vec::new()));
+                        }
+                    }
+                    _ => {}
+                }
+                path.push(name);
             }
-            topics = &topics[topics.find("</topic>").map_or(topics.len(), |at| at + "</topic>".len())..];
-        }
-        rest = &rest[rest.find("</publish>").map_or(rest.len(), |at| at + "</publish>".len())..];
-    }
-    Ok(false)
-}
-
-/// Whether `name` matches the DDS topic expression `pattern` (`*` any run of characters, `?` one; as `fnmatch`).
-fn glob_matches(pattern: &str, name: &str) -> bool {
-    let (pattern, name) = (pattern.as_bytes(), name.as_bytes());
-    let (mut p, mut n) = (0, 0);
-    let mut star: Option<(usize, usize)> = None;
-    while n < name.len() {
-        if p < pattern.len() && (pattern[p] == b'?' || pattern[p] == name[n]) {
-            p += 1;
-            n += 1;
-        } else if p < pattern.len() && pattern[p] == b'*' {
-            star = Some((p, n));
-            p += 1;
-        } else if let Some((star_p, star_n)) = star {
-            p = star_p + 1;
-            n = star_n + 1;
-            star = Some((star_p, star_n + 1));
-        } else {
-            return false;
+            Event::End(_) => {
+                let closed = path.pop();
+                if closed.as_deref() == Some("grant") {
+                    break; // The first grant is the participant's.
+                }
+            }
+            Event::Text(text) => {
+                let text = text.xml10_content().trim().to_owned();
+                let names: Vec<&str> = path.iter().map(String::as_str).collect();
+                match (grant.as_mut(), names.as_slice()) {
+                    (Some(grant), [.., "grant", _, "publish", "topics", "topic"]) => {
+                        if let Some((_, topics)) = grant.rules.last_mut() {
+                            topics.push(text);
+                        }
+                    }
+                    (Some(grant), [.., "grant", "default"]) => grant.default_allows = text == "ALLOW",
+                    _ => {}
+                }
+            }
+            Event::Eof => break,
+            _ => {}
         }
     }
-    pattern[p..].iter().all(|&c| c == b'*')
+    Ok(grant)
 }
 
+/// Whether an element opened under `path` is a direct child of a grant.
+fn directly_under_grant(path: &[String]) -> bool {
+    path.last().is_some_and(|last| last == "grant")
+}
+
+/// The trimmed text between the first `start` and the next `end` in `text`.
 fn between<'t>(text: &'t str, start: &str, end: &str) -> Option<&'t str> {
     let from = text.find(start)? + start.len();
     let to = text[from..].find(end)? + from;
@@ -355,15 +395,40 @@ fn between<'t>(text: &'t str, start: &str, end: &str) -> Option<&'t str> {
 mod tests {
     use super::*;
 
+    /// A grant with `rules` (`(allow, publish topic expressions)`) and `default`, in a permissions document.
+    fn document(rules: &[(bool, &[&str])], default: &str) -> String {
+        let rules: String = rules
+            .iter()
+            .map(|(allow, topics)| {
+                let kind = if *allow { "allow_rule" } else { "deny_rule" };
+                let topics: String = topics.iter().map(|t| format!("<topic>{t}</topic>")).collect();
+                format!("<{kind}><domains><id>0</id></domains><publish><topics>{topics}</topics></publish></{kind}>")
+            })
+            .collect();
+        format!(
+            "<dds><permissions><grant name=\"g\"><subject_name>CN=g</subject_name>{rules}<default>{default}</default></grant></permissions></dds>"
+        )
+    }
+
+    fn decides(rules: &[(bool, &[&str])], default: &str) -> bool {
+        let dir = std::env::temp_dir().join(format!("cortex-unit-grant-rules-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("permissions.p7s"), format!("MIME-Version: 1.0\n\n{}\n", document(rules, default)))
+            .unwrap();
+        let decided = may_write_graph(&dir, "dsr").unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        decided
+    }
+
     #[test]
-    fn topic_expressions_match_as_fnmatch_does() {
-        assert!(glob_matches("*", "dsr_updates"));
-        assert!(glob_matches("dsr_*", "dsr_updates"));
-        assert!(glob_matches("*_requests", "dsr_requests"));
-        assert!(!glob_matches("*_requests", "dsr_updates"));
-        assert!(!glob_matches("dsr_requests", "dsr_requests_be"));
-        assert!(glob_matches("d?r_*s", "dsr_updates"));
-        assert!(!glob_matches("robot_*", "dsr_updates"));
+    fn the_first_rule_whose_topic_expression_matches_the_updates_topic_decides_else_the_default() {
+        assert!(decides(&[(true, &["*"])], "DENY"));
+        assert!(decides(&[(true, &["d?r_*s"])], "DENY"), "fnmatch's ? and *");
+        assert!(!decides(&[(true, &["*_requests"])], "DENY"), "a reader's grant");
+        assert!(!decides(&[(true, &["dsr_updates_be"])], "DENY"));
+        assert!(!decides(&[(false, &["dsr_*"]), (true, &["*"])], "ALLOW"), "a deny rule first");
+        assert!(decides(&[(true, &["dsr_[tu]pdates"]), (false, &["*"])], "DENY"), "an allow rule first, with a class");
+        assert!(decides(&[(true, &["robot_*"])], "ALLOW"), "no rule matches: the default");
     }
 
     #[test]
