@@ -16,7 +16,6 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use bytes::Bytes;
-use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
 use dsr::{AttrKey, AttrType, Change, Digest, Element, NodeId, OpError, Replica, Value, VisibleGraph};
 use transport::{Channel, Clock, Sample, Transport, TransportError};
 
@@ -28,7 +27,10 @@ use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
 use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Output, Send};
 use crate::envelope::{Envelope, Message};
 
+mod signals;
 mod writes;
+
+pub use signals::CallbackId;
 
 /// Errors of the agent API.
 #[derive(Debug, thiserror::Error)]
@@ -117,6 +119,15 @@ struct Locked {
     timeline: JoinTimeline,
 }
 
+/// Where a sample came from, for messages: formatted only when one is written.
+struct SampleOrigin<'a>(&'a Sample);
+
+impl std::fmt::Display for SampleOrigin<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} on channel {}", self.0.origin, self.0.channel.name())
+    }
+}
+
 /// The receiving thread's longest wait while joining.
 const JOINING_TICK: Duration = Duration::from_millis(2);
 
@@ -126,14 +137,13 @@ struct Inner<T> {
     transport: T,
     clock: Arc<dyn Clock>,
     state: Mutex<Locked>,
-    subscribers: Mutex<Vec<Sender<ChangeSignal>>>,
+    signals: signals::Signals,
     stop: AtomicBool,
     /// Whether the replica exists (the receiving thread polls faster while joining).
     joined: AtomicBool,
     /// The latest graph request answered.
     last_answer: Mutex<Option<AnswerTiming>>,
     rejected: AtomicU64,
-    signals_dropped: AtomicU64,
     digest_mismatches: AtomicU64,
     gap_requests: AtomicU64,
     publish_failures: AtomicU64,
@@ -200,12 +210,11 @@ impl<T: Transport + 'static> Agent<T> {
             transport,
             clock,
             state: Mutex::new(state),
-            subscribers: Mutex::new(Vec::new()),
+            signals: signals::Signals::default(),
             stop: AtomicBool::new(false),
             joined: AtomicBool::new(false),
             last_answer: Mutex::new(None),
             rejected: AtomicU64::new(0),
-            signals_dropped: AtomicU64::new(0),
             digest_mismatches: AtomicU64::new(0),
             gap_requests: AtomicU64::new(0),
             publish_failures: AtomicU64::new(0),
@@ -352,13 +361,6 @@ impl<T: Transport + 'static> Agent<T> {
         self.inner.lock().core.is_ready()
     }
 
-    /// A new subscription to change signals, holding up to `capacity` undelivered signals.
-    pub fn subscribe(&self, capacity: usize) -> Receiver<ChangeSignal> {
-        let (sender, receiver) = bounded(capacity.max(1));
-        self.inner.subscribers.lock().unwrap_or_else(|p| p.into_inner()).push(sender);
-        receiver
-    }
-
     /// Status and counters.
     pub fn status(&self) -> AgentStatus {
         let locked = self.inner.lock();
@@ -374,7 +376,7 @@ impl<T: Transport + 'static> Agent<T> {
             misrouted_refused: core.misrouted_refused(),
             read_only: self.inner.config.read_only,
             rejected: self.inner.rejected.load(Ordering::Relaxed),
-            signals_dropped: self.inner.signals_dropped.load(Ordering::Relaxed),
+            signals_dropped: self.inner.signals.dropped(),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
             digest_mismatches: self.inner.digest_mismatches.load(Ordering::Relaxed),
             gap_requests: self.inner.gap_requests.load(Ordering::Relaxed),
@@ -574,32 +576,17 @@ impl<T: Transport> Inner<T> {
             return;
         }
         let mine = self.lock().core.replica().map(Replica::id);
-        let mut subscribers = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
-        for event in changes {
-            let signal = ChangeSignal {
-                origin: event.origin.map(AgentId::of_replica),
-                local: event.origin.is_some() && event.origin == mine,
-                change: event.change,
-            };
-            subscribers.retain(|sender| match sender.try_send(signal.clone()) {
-                Ok(()) => true,
-                Err(TrySendError::Full(_)) => {
-                    self.signals_dropped.fetch_add(1, Ordering::Relaxed);
-                    true
-                }
-                Err(TrySendError::Disconnected(_)) => false,
-            });
-        }
+        self.signals.deliver(mine, changes);
     }
 
-    fn reject(&self, origin: &str, what: &str, error: &dyn std::fmt::Display) {
+    fn reject(&self, origin: &dyn std::fmt::Display, what: &str, error: &dyn std::fmt::Display) {
         self.rejected.fetch_add(1, Ordering::Relaxed);
         tracing::error!("{}: dropped a {what} from {origin}: {error}", self.me());
     }
 
     /// Tells a person, counts and records what the core reported (under the state lock: a new life's incarnation
     /// is recorded before the life can write).
-    fn report(&self, locked: &mut Locked, events: &[Event], origin: &str) {
+    fn report(&self, locked: &mut Locked, events: &[Event], origin: &dyn std::fmt::Display) {
         let me = self.me();
         for event in events {
             match event {
@@ -682,10 +669,10 @@ impl<T: Transport> Inner<T> {
 
     fn handle(&self, sample: Sample) {
         let received_ns = self.clock.now_ns();
-        let origin = || format!("{} on channel {}", sample.origin, sample.channel.name());
+        let origin = SampleOrigin(&sample);
         let Envelope { graph, message } = match Envelope::decode(&sample.bytes) {
             Ok(envelope) => envelope,
-            Err(error) => return self.reject(&origin(), "sample", &error),
+            Err(error) => return self.reject(&origin, "sample", &error),
         };
         if message.to().is_some_and(|to| to != self.me()) {
             return;
@@ -695,7 +682,7 @@ impl<T: Transport> Inner<T> {
             let mut locked = self.lock();
             let mut out = Output::default();
             let admitted = locked.core.admit_channel(sample.channel, &message, &mut out);
-            self.report(&mut locked, &out.events, &origin());
+            self.report(&mut locked, &out.events, &origin);
             if !admitted {
                 return;
             }
@@ -708,7 +695,7 @@ impl<T: Transport> Inner<T> {
                     let mut locked = self.lock();
                     let mut out = Output::default();
                     let admitted = locked.core.admit(graph, message.from(), message.kind(), &mut out);
-                    self.report(&mut locked, &out.events, &origin());
+                    self.report(&mut locked, &out.events, &origin);
                     if admitted {
                         locked.core.heard_from(message.from());
                     }
@@ -733,14 +720,14 @@ impl<T: Transport> Inner<T> {
         };
         let decoded = Input::decode(message);
         for (what, error) in &decoded.rejected {
-            self.reject(&origin(), what, error);
+            self.reject(&origin, what, error);
         }
         let Some(input) = decoded.input else { return };
         let decoded_ns = self.clock.now_ns();
         let (out, answered) = {
             let mut locked = self.lock();
             let out = locked.core.handle(decoded_ns, graph, input);
-            self.report(&mut locked, &out.events, &origin());
+            self.report(&mut locked, &out.events, &origin);
             if let (Some(bytes), true) = (answer_bytes, out.events.iter().any(|e| matches!(e, Event::Ready { .. }))) {
                 let timeline = &mut locked.timeline;
                 timeline.answer_received_ns = Some(received_ns);
@@ -782,7 +769,7 @@ impl<T: Transport> Inner<T> {
                 locked.core.discovery_matched();
             }
             let out = locked.core.tick(now);
-            self.report(&mut locked, &out.events, "this agent");
+            self.report(&mut locked, &out.events, &"this agent");
             if out.events.iter().any(|e| matches!(e, Event::Ready { .. })) {
                 locked.timeline.ready_ns = Some(now);
             }

@@ -63,7 +63,9 @@ pub mod rtps;
 pub mod shm;
 pub mod status;
 
-pub use agent::{Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, ChangeSignal, JoinTimeline, StatusLine};
+pub use agent::{
+    Agent, AgentConfig, AgentError, AgentStatus, AnswerTiming, CallbackId, ChangeSignal, JoinTimeline, StatusLine,
+};
 pub use calls::{CallError, CallReplier, CallServer, PendingCall};
 pub use envelope::CallFault;
 pub use graph_id::GraphId;

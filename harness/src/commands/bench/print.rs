@@ -45,21 +45,17 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
             );
         }
     }
-    if let Some(f) = &result.shm_agent {
+    let shm = [("agent, shared memory", &result.shm_agent), ("raw shared memory", &result.shm_raw)];
+    for (who, f) in shm.into_iter().filter_map(|(who, f)| Some((who, f.as_ref()?))) {
         let socket_bytes = f.socket.as_ref().map_or("-".into(), |s| format!("{:.1}", s.bytes_per_update));
         let repairs = f.gap_requests.map_or("-".into(), |n| n.to_string());
         println!(
-            "{:<26} {:>7} {:>7} {:>7} {:>7} {:>5} {repairs:>8} {:>14.1} {:>12} {socket_bytes:>12} {:>9}",
-            "agent, shared memory",
-            f.p50_us,
-            f.p90_us,
-            f.p99_us,
-            f.max_us,
-            f.lost,
-            f.envelope_bytes_per_update,
-            "-",
-            "-"
+            "{who:<26} {:>7} {:>7} {:>7} {:>7} {:>5} {repairs:>8} {:>14.1} {:>12} {socket_bytes:>12} {:>9}",
+            f.p50_us, f.p90_us, f.p99_us, f.max_us, f.lost, f.envelope_bytes_per_update, "-", "-"
         );
+    }
+    if let (Some(agent), Some(raw)) = (&result.shm_agent, &result.shm_raw) {
+        println!("shared memory: agent p50 / raw p50 = {:.2}", agent.p50_us as f64 / raw.p50_us.max(1) as f64);
     }
     for run in &result.runs {
         println!("{} updates: agent p50 / raw p50 = {:.2}", run.updates, run.p50_ratio);

@@ -60,6 +60,8 @@ pub struct RttResult {
     pub multicast: bool,
     /// Two agents over same-host shared memory, same loop (with `RttConfig::shm`).
     pub shm_agent: Option<RttFigures>,
+    /// Raw samples over the same shared-memory transport, same loop (with `RttConfig::shm`): its limit.
+    pub shm_raw: Option<RttFigures>,
     /// Whether the run was in a fresh network namespace (socket-level bytes measured).
     pub netns: bool,
     /// One entry per delivery of updates.
@@ -157,12 +159,14 @@ struct LoopCounts {
 }
 
 /// The closed loop both ping-pongs share: `WARMUP + count` pings `period` apart; `ping(seq)` sends one,
-/// `pong(seq, deadline)` waits until `deadline` for its answer and says whether it came.
+/// `pong(seq, deadline)` waits until `deadline` for its answer and says when it was seen (`None`: not in time). An
+/// agent's pong is seen in a change callback, on the thread that joined it, as a raw pong is on the thread that
+/// takes it from the transport.
 fn ping_pong(
     count: u32,
     period: Duration,
     mut ping: impl FnMut(u64) -> anyhow::Result<()>,
-    mut pong: impl FnMut(u64, Instant) -> bool,
+    mut pong: impl FnMut(u64, Instant) -> Option<Instant>,
 ) -> anyhow::Result<LoopCounts> {
     let mut counts = LoopCounts { pings: 0, pongs: 0, lost: 0, histogram_us: Histogram::new(3)? };
     let mut next = Instant::now();
@@ -170,13 +174,12 @@ fn ping_pong(
         let sent = Instant::now();
         ping(seq)?;
         counts.pings += 1;
-        let got = pong(seq, sent + PONG_TIMEOUT);
-        counts.pongs += u64::from(got);
+        let seen = pong(seq, sent + PONG_TIMEOUT);
+        counts.pongs += u64::from(seen.is_some());
         if seq >= u64::from(WARMUP) {
-            if got {
-                counts.histogram_us.record(sent.elapsed().as_micros() as u64)?;
-            } else {
-                counts.lost += 1;
+            match seen {
+                Some(seen) => counts.histogram_us.record(seen.saturating_duration_since(sent).as_micros() as u64)?,
+                None => counts.lost += 1,
             }
         }
         next += period;
@@ -213,7 +216,7 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
     let period = Duration::from_secs_f64(1.0 / config.rate_hz);
     let mut runs = Vec::new();
     for &updates in &config.updates {
-        let raw = raw(config, updates, period, counting, program)
+        let raw = raw(config, updates, period, counting, program, false)
             .with_context(|| format!("raw rustdds ping-pong, {} updates", updates.name()))?;
         let agent = through_agents(config, updates, period, counting, program, Via::Rtps)
             .with_context(|| format!("agent ping-pong, {} updates", updates.name()))?;
@@ -235,15 +238,18 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
             raw,
         });
     }
-    let shm_agent = if config.shm {
-        let figures = through_agents(config, UpdateDelivery::Reliable, period, counting, program, Via::Shm)
+    let (shm_agent, shm_raw) = if config.shm {
+        let raw = raw(config, UpdateDelivery::Reliable, period, counting, program, true)
+            .context("raw ping-pong over shared memory")?;
+        let agent = through_agents(config, UpdateDelivery::Reliable, period, counting, program, Via::Shm)
             .context("agent ping-pong over shared memory")?;
-        Some(figures)
+        (Some(agent), Some(raw))
     } else {
-        None
+        (None, None)
     };
     Ok(RttResult {
         shm_agent,
+        shm_raw,
         payload: config.payload_bytes,
         rate_hz: config.rate_hz,
         count: config.count,
@@ -253,17 +259,24 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
     })
 }
 
+/// Raw samples between two processes, each the other's transport endpoint: over RTPS with `updates`, or over
+/// same-host shared memory with `shm` (then `updates` only names the loop).
 fn raw(
     config: &RttConfig,
     updates: UpdateDelivery,
     period: Duration,
     counting: &Counting,
     program: &Path,
+    shm: bool,
 ) -> anyhow::Result<RttFigures> {
-    let prefix = format!("rawrtt{}{}", std::process::id(), updates.name().replace('-', ""));
+    let prefix = format!("rawrtt{}{}{}", std::process::id(), updates.name().replace('-', ""), if shm { "shm" } else { "" });
     let start = counting.counters()?;
-    let transport = rtps(config.domain_id, &prefix, config.multicast, updates)?;
-    let args = helper::echo_args(config.domain_id, &prefix, true, config.multicast, updates, None, false);
+    let transport: Arc<dyn Transport> = if shm {
+        Arc::new(shm_transport(&prefix, 1)?)
+    } else {
+        Arc::new(rtps(config.domain_id, &prefix, config.multicast, updates)?)
+    };
+    let args = helper::echo_args(config.domain_id, &prefix, true, config.multicast, updates, None, shm);
     let _helper = Helper::spawn(program, &args)?;
     // Discovery: probe until an echo comes back.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -286,10 +299,10 @@ fn raw(
         |seq, deadline| {
             while let Some(sample) = transport.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
                 if seq_of(&sample.bytes) == Some(seq) {
-                    return true;
+                    return Some(Instant::now());
                 }
             }
-            false
+            None
         },
     )?;
     let end = counting.counters()?;
@@ -346,13 +359,21 @@ fn through_agents(
             Some(credentials.this.as_path()),
         )?),
     };
-    let agent = Agent::start(bench_config(1, Duration::from_millis(300)), transport, Arc::new(SystemClock))?;
+    let agent = Arc::new(Agent::start(bench_config(1, Duration::from_millis(300)), transport, Arc::new(SystemClock))?);
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the pinging agent did not start");
     }
     let ping = agent.insert_node(NewNode::new("object", PING))?;
     let pong = agent.insert_node(NewNode::new("object", PONG))?;
-    let signals = agent.subscribe(100_000);
+    let (pongs, seen) = std::sync::mpsc::channel::<(u64, Instant)>();
+    let weak = Arc::downgrade(&agent);
+    let callback = agent.on_change(move |signal| {
+        let at = Instant::now();
+        let Some(agent) = weak.upgrade().filter(|_| is_pong(&signal.change, pong)) else { return };
+        if let Some(seq) = agent.attr(pong, attrs::CAM_RGB).and_then(|b| seq_of(&b)) {
+            let _ = pongs.send((seq, at));
+        }
+    });
     let security = match via {
         Via::Secured(credentials) => Some(credentials.helper.as_path()),
         Via::Rtps | Via::Shm => None,
@@ -367,15 +388,12 @@ fn through_agents(
             bail!("the echo agent did not answer within 30 s");
         }
         agent.set_attr(ping, attrs::CAM_RGB, payload_of(u64::MAX, config.payload_bytes))?;
-        let until = Instant::now() + Duration::from_millis(200);
-        while let Ok(signal) = signals.recv_deadline(until) {
-            if is_pong(&signal.change, pong) {
-                break 'probe;
-            }
+        if seen.recv_timeout(Duration::from_millis(200)).is_ok() {
+            break 'probe;
         }
     }
     std::thread::sleep(Duration::from_millis(200));
-    while signals.try_recv().is_ok() {}
+    while seen.try_recv().is_ok() {}
     let discovered = counting.counters()?;
     let before = agent.status();
     let counts = ping_pong(
@@ -383,16 +401,15 @@ fn through_agents(
         period,
         |seq| Ok(agent.set_attr(ping, attrs::CAM_RGB, payload_of(seq, config.payload_bytes))?),
         |seq, deadline| {
-            while let Ok(signal) = signals.recv_deadline(deadline) {
-                if is_pong(&signal.change, pong)
-                    && agent.attr(pong, attrs::CAM_RGB).and_then(|b| seq_of(&b)) == Some(seq)
-                {
-                    return true;
+            while let Ok((got, at)) = seen.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                if got == seq {
+                    return Some(at);
                 }
             }
-            false
+            None
         },
     )?;
+    agent.remove_on_change(callback);
     let end = counting.counters()?;
     let after = agent.status();
     let socket = SocketFigures::of(start, discovered, end, counts.pings + counts.pongs);
@@ -444,23 +461,27 @@ pub fn echo(
         }
         return Ok(());
     }
-    let agent = Agent::start(bench_config(2, Duration::from_secs(30)), transport, Arc::new(SystemClock))?;
-    let signals = agent.subscribe(100_000);
+    let agent = Arc::new(Agent::start(bench_config(2, Duration::from_secs(30)), transport, Arc::new(SystemClock))?);
     if !agent.wait_ready(Duration::from_secs(30)) {
         bail!("the echo agent got no graph");
     }
     let find = |name: &str| agent.node_by_name(name).map(|n| n.id);
     let (Some(ping), Some(pong)) = (find(PING), find(PONG)) else { bail!("the graph has no ping/pong nodes") };
-    while let Ok(signal) = signals.recv_timeout(Duration::from_secs(60)) {
-        if let Change::AttrUpdated { element: Element::Node(id), name } = &signal.change
-            && *id == ping
-            && name.as_str() == "cam_rgb"
-            && !signal.local
-            && let Some(value) = agent.attr(ping, attrs::CAM_RGB)
-        {
-            agent.set_attr(pong, attrs::CAM_RGB, value)?;
+    // Echoed in a change callback, on the thread that joined the ping; this thread only watches for silence.
+    let (heard, pings) = std::sync::mpsc::channel::<Result<(), String>>();
+    let weak = Arc::downgrade(&agent);
+    agent.on_change(move |signal| {
+        let is_ping = matches!(&signal.change, Change::AttrUpdated { element: Element::Node(id), name }
+            if *id == ping && name.as_str() == "cam_rgb");
+        let Some(agent) = weak.upgrade().filter(|_| is_ping && !signal.local) else { return };
+        if let Some(value) = agent.attr(ping, attrs::CAM_RGB) {
+            drop(heard.send(agent.set_attr(pong, attrs::CAM_RGB, value).map_err(|e| e.to_string())));
         }
+    });
+    while let Ok(echoed) = pings.recv_timeout(Duration::from_secs(60)) {
+        echoed.map_err(|error| anyhow::anyhow!("echoing a ping: {error}"))?;
     }
+    agent.shutdown();
     Ok(())
 }
 

@@ -7,7 +7,7 @@
 //! tells the receivers to report and exit.
 
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use agent::rtps::AgentTransport;
@@ -180,10 +180,10 @@ fn record_latencies(window: &mut Window, written: &[(u64, u64)], reports: &[Rece
 }
 
 /// A receiver process of an agent path: an agent of the graph on `domain` and `prefix` over `link` that stamps
-/// every new value of the source's `cam_rgb` and answers those that ask, until told to stop.
+/// every new value of the source's `cam_rgb` in a change callback (on the thread that joined it, as raw iceoryx2's
+/// receivers stamp on theirs) and answers those that ask, until told to stop.
 pub(super) fn receive(link: Link, domain: u16, prefix: &str, index: u32) -> anyhow::Result<ReceiverReport> {
     let agent = link.start(config(2 + index, Duration::from_secs(30)), rtps(domain, prefix), None)?;
-    let signals = agent.subscribe(100_000);
     if !agent.wait_ready(Duration::from_secs(30)) {
         bail!("receiver {index} got no graph within 30 s");
     }
@@ -198,33 +198,99 @@ pub(super) fn receive(link: Link, domain: u16, prefix: &str, index: u32) -> anyh
         std::thread::sleep(Duration::from_millis(10));
     };
     let me = agent.insert_node(NewNode::new("object", &receiver_node(index))).context("the receiver's node")?;
-    let mut delivered = Vec::new();
-    let mut last = None;
+    let stamps = Arc::new(Mutex::new(Stamps { heard_ns: SystemClock.now_ns(), ..Stamps::default() }));
+    let (stop, stopped) = std::sync::mpsc::sync_channel(1);
+    let callback = {
+        let (weak, stamps) = (Arc::downgrade(&agent), Arc::clone(&stamps));
+        agent.on_change(move |signal| {
+            let from_source = matches!(&signal.change, Change::AttrUpdated { element: Element::Node(id), name }
+                if *id == source && name.as_str() == "cam_rgb");
+            let Some(agent) = weak.upgrade().filter(|_| from_source && !signal.local) else { return };
+            let at = SystemClock.now_ns();
+            let Some(value) = agent.attr(source, attrs::CAM_RGB).and_then(|b| seq_of(&b)) else { return };
+            match stamps.lock().unwrap_or_else(|p| p.into_inner()).take(value, at) {
+                Heard::Stop => drop(stop.try_send(())),
+                Heard::Answer(number) => {
+                    if let Err(error) = agent.set_attr(me, attrs::CAM_RGB, payload_of(number, 8)) {
+                        let failure = format!("receiver {index}: answering sample {number} failed: {error}");
+                        stamps.lock().unwrap_or_else(|p| p.into_inner()).failure.get_or_insert(failure);
+                    }
+                }
+                Heard::Quiet => {}
+            }
+        })
+    };
+    let outcome = wait_for_stop(&stamps, &stopped, index);
+    agent.remove_on_change(callback);
+    agent.shutdown();
+    outcome?;
+    let delivered = std::mem::take(&mut stamps.lock().unwrap_or_else(|p| p.into_inner()).delivered);
+    Ok(ReceiverReport { index, delivered })
+}
+
+/// Waits for the stop value; fails when the writer has been silent for [`WRITER_SILENT`].
+fn wait_for_stop(
+    stamps: &Mutex<Stamps>,
+    stopped: &std::sync::mpsc::Receiver<()>,
+    index: u32,
+) -> anyhow::Result<()> {
     loop {
-        let signal = signals.recv_timeout(WRITER_SILENT).map_err(|_| anyhow::anyhow!("the writer fell silent"))?;
-        let from_source = matches!(&signal.change, Change::AttrUpdated { element: Element::Node(id), name }
-            if *id == source && name.as_str() == "cam_rgb");
-        if !from_source || signal.local {
-            continue;
+        if stopped.recv_timeout(Duration::from_secs(1)).is_ok() {
+            return Ok(());
         }
-        let at = SystemClock.now_ns();
-        let Some(value) = agent.attr(source, attrs::CAM_RGB).and_then(|b| seq_of(&b)) else { continue };
-        if value == STOP {
-            break;
+        let (heard_ns, failure) = {
+            let stamps = stamps.lock().unwrap_or_else(|p| p.into_inner());
+            (stamps.heard_ns, stamps.failure.clone())
+        };
+        if let Some(failure) = failure {
+            bail!(failure);
         }
-        if last == Some(value) {
-            continue;
-        }
-        last = Some(value);
-        if value & PROBE == 0 {
-            delivered.push([value & NUMBER, at]);
-        }
-        if value & ANSWER != 0 {
-            agent.set_attr(me, attrs::CAM_RGB, payload_of(value & NUMBER, 8))?;
+        if SystemClock.now_ns().saturating_sub(heard_ns) > WRITER_SILENT.as_nanos() as u64 {
+            bail!("receiver {index}: the writer fell silent");
         }
     }
-    agent.shutdown();
-    Ok(ReceiverReport { index, delivered })
+}
+
+/// What a receiver has heard from the writer.
+#[derive(Default)]
+struct Stamps {
+    /// `[number, stamp ns]` of every measured sample.
+    delivered: Vec<[u64; 2]>,
+    /// The last value taken.
+    last: Option<u64>,
+    /// When the last value was taken (at first, when the receiver started listening).
+    heard_ns: u64,
+    /// The first answer that could not be written.
+    failure: Option<String>,
+}
+
+/// What to do about a value the writer wrote.
+#[derive(Debug, PartialEq, Eq)]
+enum Heard {
+    /// Nothing more (a measured or probe sample that asks for no answer, or a repeat).
+    Quiet,
+    /// Answer with this number.
+    Answer(u64),
+    /// The writer is done.
+    Stop,
+}
+
+impl Stamps {
+    /// Takes the value `value` stamped `at_ns`: records it if it is measured and new, and says what to do.
+    fn take(&mut self, value: u64, at_ns: u64) -> Heard {
+        self.heard_ns = at_ns;
+        if value == STOP {
+            return Heard::Stop;
+        }
+        if self.last == Some(value) {
+            return Heard::Quiet;
+        }
+        self.last = Some(value);
+        if value & PROBE == 0 {
+            self.delivered.push([value & NUMBER, at_ns]);
+        }
+        if value & ANSWER != 0 { Heard::Answer(value & NUMBER) } else { Heard::Quiet }
+    }
 }
 
 #[cfg(test)]
@@ -253,5 +319,17 @@ mod tests {
         assert_eq!(window.latencies.len(), 3);
         assert_eq!(window.latencies.max(), 700);
         assert_eq!(window.latencies.min(), 100);
+    }
+
+    #[test]
+    fn a_receiver_records_measured_values_once_answers_those_that_ask_and_stops_on_stop() {
+        let mut stamps = Stamps::default();
+        assert_eq!(stamps.take(3, 10), Heard::Quiet);
+        assert_eq!(stamps.take(3, 11), Heard::Quiet, "a repeat is not recorded twice");
+        assert_eq!(stamps.take(4 | PROBE | ANSWER, 12), Heard::Answer(4));
+        assert_eq!(stamps.take(5 | ANSWER, 13), Heard::Answer(5));
+        assert_eq!(stamps.take(STOP, 14), Heard::Stop);
+        assert_eq!(stamps.delivered, vec![[3, 10], [5, 13]], "probes are not measured");
+        assert_eq!(stamps.heard_ns, 14);
     }
 }
