@@ -4,6 +4,7 @@
 
 use std::path::Path;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use agent::{Agent, AgentConfig, AgentId};
@@ -13,7 +14,7 @@ use hdrhistogram::Histogram;
 use serde::Serialize;
 use transport::rtps::{Multicast, UpdateDelivery};
 use transport::shm::{ShmSettings, ShmTransport};
-use transport::{Channel, EndpointId, SystemClock, Transport};
+use transport::{Channel, Clock as _, EndpointId, SystemClock, Transport};
 
 use super::helper::{self, Helper};
 use super::{Counting, Credentials, growth, payload_of, rtps, rtps_secured, seq_of};
@@ -23,6 +24,8 @@ use crate::netns::LoopbackCounters;
 pub const WARMUP: u32 = 100;
 const PING: &str = "bench_ping";
 const PONG: &str = "bench_pong";
+/// How long the echoing side waits for a ping before it exits.
+const ECHO_SILENCE: Duration = Duration::from_secs(60);
 /// How long a ping waits for its pong before it counts as lost.
 const PONG_TIMEOUT: Duration = Duration::from_secs(1);
 
@@ -467,19 +470,26 @@ pub fn echo(
     }
     let find = |name: &str| agent.node_by_name(name).map(|n| n.id);
     let (Some(ping), Some(pong)) = (find(PING), find(PONG)) else { bail!("the graph has no ping/pong nodes") };
-    // Echoed in a change callback, on the thread that joined the ping; this thread only watches for silence.
-    let (heard, pings) = std::sync::mpsc::channel::<Result<(), String>>();
-    let weak = Arc::downgrade(&agent);
+    // Echoed in a change callback, on the thread that joined the ping; this thread only watches for silence and
+    // failures (a wake-up of its own per ping would compete with the echo for the CPU).
+    let heard_ns = Arc::new(AtomicU64::new(SystemClock.now_ns()));
+    let (failed, failure) = std::sync::mpsc::sync_channel::<String>(1);
+    let (weak, heard) = (Arc::downgrade(&agent), Arc::clone(&heard_ns));
     agent.on_change(move |signal| {
         let is_ping = matches!(&signal.change, Change::AttrUpdated { element: Element::Node(id), name }
             if *id == ping && name.as_str() == "cam_rgb");
         let Some(agent) = weak.upgrade().filter(|_| is_ping && !signal.local) else { return };
-        if let Some(value) = agent.attr(ping, attrs::CAM_RGB) {
-            drop(heard.send(agent.set_attr(pong, attrs::CAM_RGB, value).map_err(|e| e.to_string())));
+        heard.store(SystemClock.now_ns(), Ordering::Relaxed);
+        if let Some(value) = agent.attr(ping, attrs::CAM_RGB)
+            && let Err(error) = agent.set_attr(pong, attrs::CAM_RGB, value)
+        {
+            let _ = failed.try_send(error.to_string());
         }
     });
-    while let Ok(echoed) = pings.recv_timeout(Duration::from_secs(60)) {
-        echoed.map_err(|error| anyhow::anyhow!("echoing a ping: {error}"))?;
+    while SystemClock.now_ns().saturating_sub(heard_ns.load(Ordering::Relaxed)) < ECHO_SILENCE.as_nanos() as u64 {
+        if let Ok(error) = failure.recv_timeout(Duration::from_secs(1)) {
+            bail!("echoing a ping: {error}");
+        }
     }
     agent.shutdown();
     Ok(())
