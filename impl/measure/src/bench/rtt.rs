@@ -272,7 +272,8 @@ fn raw(
     program: &Path,
     shm: bool,
 ) -> anyhow::Result<RttFigures> {
-    let prefix = format!("rawrtt{}{}{}", std::process::id(), updates.name().replace('-', ""), if shm { "shm" } else { "" });
+    let prefix =
+        format!("rawrtt{}{}{}", std::process::id(), updates.name().replace('-', ""), if shm { "shm" } else { "" });
     let start = counting.counters()?;
     let transport: Arc<dyn Transport> = if shm {
         Arc::new(shm_transport(&prefix, 1)?)

@@ -229,11 +229,7 @@ pub(super) fn receive(link: Link, domain: u16, prefix: &str, index: u32) -> anyh
 }
 
 /// Waits for the stop value; fails when the writer has been silent for [`WRITER_SILENT`].
-fn wait_for_stop(
-    stamps: &Mutex<Stamps>,
-    stopped: &std::sync::mpsc::Receiver<()>,
-    index: u32,
-) -> anyhow::Result<()> {
+fn wait_for_stop(stamps: &Mutex<Stamps>, stopped: &std::sync::mpsc::Receiver<()>, index: u32) -> anyhow::Result<()> {
     loop {
         if stopped.recv_timeout(Duration::from_secs(1)).is_ok() {
             return Ok(());
