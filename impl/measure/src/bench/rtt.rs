@@ -510,7 +510,8 @@ mod tests {
                 sent.push(seq);
                 Ok(())
             },
-            |seq, _| seq % 5 != 0,
+            // A pong seen 2 ms after its ping (the deadline is the ping's send time and the timeout).
+            |seq, deadline| (seq % 5 != 0).then(|| deadline - PONG_TIMEOUT + Duration::from_millis(2)),
         )
         .unwrap();
         assert_eq!(sent, (0..u64::from(WARMUP) + 10).collect::<Vec<_>>());
@@ -519,13 +520,23 @@ mod tests {
         assert_eq!(counts.pongs, 110 - 22);
         assert_eq!(counts.lost, 2);
         assert_eq!(counts.histogram_us.len(), 8);
+        assert_eq!(
+            (counts.histogram_us.min(), counts.histogram_us.max()),
+            (2000, 2000),
+            "timed to when the pong was seen"
+        );
         let f = figures(&counts, 1100, 2200, None);
         assert_eq!((f.count, f.lost, f.envelope_bytes_per_update, f.wire_bytes_per_update), (8, 2, 10.0, 20.0));
     }
 
     #[test]
     fn a_failed_ping_stops_the_loop() {
-        let result = ping_pong(5, Duration::ZERO, |seq| if seq == 3 { bail!("refused") } else { Ok(()) }, |_, _| true);
+        let result = ping_pong(
+            5,
+            Duration::ZERO,
+            |seq| if seq == 3 { bail!("refused") } else { Ok(()) },
+            |_, _| Some(Instant::now()),
+        );
         assert!(result.unwrap_err().to_string().contains("refused"));
     }
 }

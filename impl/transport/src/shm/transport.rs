@@ -194,6 +194,23 @@ mod tests {
     }
 
     #[test]
+    fn a_publish_wakes_the_other_endpoints_and_not_its_own() {
+        let prefix = format!("cortex/test/{}/wake-others", std::process::id());
+        let settings = ShmSettings { max_sample_bytes: 1 << 10, ..ShmSettings::default() };
+        let a = ShmTransport::open(&prefix, EndpointId(20), &settings).expect("a");
+        let b = ShmTransport::open(&prefix, EndpointId(21), &settings).expect("b");
+        let c = ShmTransport::open(&prefix, EndpointId(22), &settings).expect("c");
+        a.publish(Channel::Updates, Bytes::from_static(b"wake")).expect("publish");
+        let woken = |t: &ShmTransport| {
+            let mut events = 0;
+            t.listener.lock().unwrap().try_wait(|_| events += 1).expect("wait");
+            events > 0
+        };
+        assert!(woken(&b) && woken(&c), "every other endpoint is woken");
+        assert!(!woken(&a), "the publisher's own listener is not");
+    }
+
+    #[test]
     fn a_sample_above_the_lane_size_is_a_too_large_error() {
         let prefix = format!("cortex/test/{}/too-large-transport", std::process::id());
         let settings = ShmSettings { max_sample_bytes: 64, ..ShmSettings::default() };
