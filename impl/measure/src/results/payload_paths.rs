@@ -7,8 +7,9 @@ use crate::spec::{PayloadPath, PayloadPathsExperiment};
 
 /// How the latencies of [`PayloadCell`] are taken, as tables state it.
 pub const PAYLOAD_PATHS_LATENCY: &str = "one way: from the writer's stamp just before it writes (an agent's \
-    set_attr, iceoryx2's loan) to each receiver's stamp when the value is in its replica (agents: the change \
-    signal) or the sample is in its hands (iceoryx2), both on this host's wall clock; memcpy: the copy alone";
+    set_attr, iceoryx2's loan) to each receiver's stamp when the value is in its replica (agents: a change \
+    callback, on the thread that joined it) or the sample is in its hands (iceoryx2), both on this host's wall \
+    clock; memcpy: the copy alone";
 
 /// Every cell of one run: the experiment, where it ran, and a cell per size, receivers and path.
 #[derive(Clone, Debug, Serialize)]
