@@ -85,7 +85,23 @@ impl<T: Transport + 'static> Agent<T> {
     /// Calls `callback` with every visible change from now on, on the thread that made it visible, with no lock
     /// of the agent held (see the module documentation): it may read and write the graph, and may run on several
     /// threads at once. A callback that takes long delays the samples behind the one it was called for; hand long
-    /// work to a thread of your own, or use [`Agent::subscribe`].
+    /// work to a thread of your own, or use [`Agent::subscribe`]. A callback that uses the agent holds it by
+    /// [`std::sync::Weak`] (an `Arc` inside would keep the agent alive through its own callback list).
+    ///
+    /// ```
+    /// # use std::sync::Arc;
+    /// # use agent::{Agent, AgentConfig, AgentId};
+    /// # use transport::{inproc::Bus, ManualClock};
+    /// let bus = Bus::new();
+    /// let agent = Arc::new(Agent::new(AgentConfig::new(AgentId(1)), bus.attach(64), Arc::new(ManualClock::new(0))).unwrap());
+    /// let weak = Arc::downgrade(&agent);
+    /// let id = agent.on_change(move |signal| {
+    ///     if let Some(agent) = weak.upgrade().filter(|_| !signal.local) {
+    ///         let _nodes = agent.status().nodes; // reads (and writes) are allowed here
+    ///     }
+    /// });
+    /// assert!(agent.remove_on_change(id));
+    /// ```
     pub fn on_change(&self, callback: impl Fn(&ChangeSignal) + Send + Sync + 'static) -> CallbackId {
         let id = CallbackId(self.inner.signals.next_callback.fetch_add(1, Ordering::Relaxed));
         self.inner.signals.callbacks.lock().unwrap_or_else(|p| p.into_inner()).push((id, Arc::new(callback)));
