@@ -14,8 +14,10 @@
 //!
 //! Copies: the sender writes the sample once, into the loaned shared-memory chunk (the publisher's loan is sized
 //! for `max_sample_bytes`; a larger sample is not sent and [`ShmPublish::TooLarge`] tells the caller to use RTPS).
-//! Each receiver copies the sample once out of shared memory into its own `Bytes`, so the chunk goes back to the
-//! publisher at once and a value the graph keeps never pins shared memory.
+//! A receiver takes a large sample in place, as a `Bytes` over the chunk, while its lane holds fewer leases than
+//! its [`LeasePolicy`] allows ([`lease`]); any other sample it copies once out of shared memory, so that chunk goes
+//! back to the publisher at once. [`ShmTransport`] leases on the updates lane alone: a graph answer or a call would
+//! hold its chunk for as long as the replica keeps what it carried.
 
 use bytes::Bytes;
 use iceoryx2::prelude::*;
@@ -23,8 +25,10 @@ use iceoryx2::service::ipc_threadsafe;
 
 use crate::EndpointId;
 
+pub mod lease;
 pub mod limit;
 mod transport;
+pub use lease::LeasePolicy;
 pub use transport::ShmTransport;
 
 /// An endpoint id no other life of any process shares, for a lane of this process: the process id in the top 32
@@ -88,11 +92,19 @@ pub struct ShmSettings {
     pub max_endpoints: usize,
     /// Samples a subscriber queues before the oldest is overwritten (the anti-entropy repairs what is lost).
     pub buffer_samples: usize,
+    /// Which received samples are taken in place rather than copied out ([`ShmTransport`] applies it to the updates
+    /// lane alone).
+    pub leases: LeasePolicy,
 }
 
 impl Default for ShmSettings {
     fn default() -> Self {
-        Self { max_sample_bytes: 8 * 1024 * 1024, max_endpoints: 16, buffer_samples: 16 }
+        Self {
+            max_sample_bytes: 8 * 1024 * 1024,
+            max_endpoints: 16,
+            buffer_samples: 16,
+            leases: LeasePolicy::default(),
+        }
     }
 }
 
@@ -113,7 +125,7 @@ pub enum ShmPublish {
 pub struct ShmSample {
     /// The endpoint that published it.
     pub origin: EndpointId,
-    /// Its bytes, copied once out of shared memory.
+    /// Its bytes: leased in place or copied once out of shared memory ([`lease`]).
     pub bytes: Bytes,
 }
 
@@ -122,6 +134,7 @@ pub struct ShmLane {
     service: String,
     origin: EndpointId,
     max_sample_bytes: usize,
+    leases: lease::Leases,
     publisher: iceoryx2::port::publisher::Publisher<ipc_threadsafe::Service, [u8], EndpointHeader>,
     subscriber: iceoryx2::port::subscriber::Subscriber<ipc_threadsafe::Service, [u8], EndpointHeader>,
     _node: Node<ipc_threadsafe::Service>,
@@ -154,6 +167,7 @@ impl ShmLane {
             .max_subscribers(settings.max_endpoints)
             .max_nodes(settings.max_endpoints)
             .subscriber_max_buffer_size(settings.buffer_samples)
+            .subscriber_max_borrowed_samples(settings.leases.max_borrowed_samples())
             .history_size(0)
             .enable_safe_overflow(true)
             .open_or_create()
@@ -168,6 +182,7 @@ impl ShmLane {
             service: service.to_owned(),
             origin,
             max_sample_bytes: settings.max_sample_bytes,
+            leases: lease::Leases::new(settings.leases),
             publisher,
             subscriber,
             _node: node,
@@ -177,6 +192,11 @@ impl ShmLane {
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service
+    }
+
+    /// Received samples this lane holds leased now.
+    pub fn leases_held(&self) -> usize {
+        self.leases.held()
     }
 
     /// Publishes `bytes` to every subscriber of the lane on this host, written once into shared memory.
@@ -213,7 +233,7 @@ impl ShmLane {
             if origin == self.origin {
                 continue;
             }
-            return Ok(Some(ShmSample { origin, bytes: Bytes::copy_from_slice(sample.payload()) }));
+            return Ok(Some(ShmSample { origin, bytes: self.leases.take(sample) }));
         }
     }
 }
@@ -239,6 +259,74 @@ mod tests {
         assert_eq!(got.bytes.as_ref(), frame.as_slice());
         assert_eq!(a.try_recv().expect("receive"), None, "a lane skips its own samples");
         assert_eq!(b.try_recv().expect("receive"), None);
+    }
+
+    fn leasing(budget: usize) -> ShmSettings {
+        ShmSettings {
+            max_sample_bytes: 1 << 20,
+            leases: LeasePolicy { min_bytes: 1024, budget },
+            ..ShmSettings::default()
+        }
+    }
+
+    #[test]
+    fn a_large_sample_is_leased_in_place_until_its_last_bytes_are_dropped_and_a_small_one_is_copied() {
+        let service = unique("lease");
+        let a = ShmLane::open(&service, EndpointId(1), &leasing(4)).expect("lane a");
+        let b = ShmLane::open(&service, EndpointId(2), &leasing(4)).expect("lane b");
+        let frame: Vec<u8> = (0..(1 << 16)).map(|i| (i % 253) as u8).collect();
+        a.publish(&frame).expect("publish");
+        a.publish(&[9u8; 100]).expect("publish");
+        let large = b.try_recv().expect("receive").expect("a sample");
+        assert_eq!(b.leases_held(), 1);
+        let small = b.try_recv().expect("receive").expect("a sample");
+        assert_eq!(b.leases_held(), 1, "a sample below min_bytes is copied");
+        assert_eq!((large.bytes.as_ref(), small.bytes.as_ref()), (frame.as_slice(), &[9u8; 100][..]));
+        let slice = large.bytes.slice(10..20);
+        drop(large);
+        assert_eq!(b.leases_held(), 1, "a slice keeps the lease");
+        assert_eq!(slice.as_ref(), &frame[10..20]);
+        drop(slice);
+        assert_eq!(b.leases_held(), 0);
+    }
+
+    #[test]
+    fn past_the_budget_samples_are_copied_and_receiving_never_fails() {
+        let service = unique("lease-budget");
+        let a = ShmLane::open(&service, EndpointId(1), &leasing(2)).expect("lane a");
+        let b = ShmLane::open(&service, EndpointId(2), &leasing(2)).expect("lane b");
+        let mut kept = Vec::new();
+        for round in 0..6u8 {
+            a.publish(&[round; 4096]).expect("publish");
+            let got = b.try_recv().expect("receive never fails").expect("a sample");
+            assert_eq!(got.bytes.as_ref(), &[round; 4096][..]);
+            kept.push(got);
+            assert_eq!(b.leases_held(), kept.len().min(2), "at most the budget is leased");
+        }
+        kept.truncate(1);
+        a.publish(&[7u8; 4096]).expect("publish");
+        let again = b.try_recv().expect("receive").expect("a sample");
+        assert_eq!(b.leases_held(), 2, "a freed slot is leased again");
+        assert_eq!(again.bytes.as_ref(), &[7u8; 4096][..]);
+    }
+
+    #[test]
+    fn a_leased_sample_stays_readable_after_its_writer_has_gone() {
+        let service = unique("lease-writer-gone");
+        let b = ShmLane::open(&service, EndpointId(2), &leasing(4)).expect("lane b");
+        let frame: Vec<u8> = (0..(1 << 18)).map(|i| (i % 241) as u8).collect();
+        let leased = {
+            let a = ShmLane::open(&service, EndpointId(1), &leasing(4)).expect("lane a");
+            a.publish(&frame).expect("publish");
+            b.try_recv().expect("receive").expect("a sample")
+        };
+        // The writer's lane and node are gone; the next receive sees the disconnection.
+        assert_eq!(b.try_recv().expect("receive"), None);
+        assert_eq!(leased.bytes.as_ref(), frame.as_slice());
+        let again = ShmLane::open(&service, EndpointId(3), &leasing(4)).expect("a new writer");
+        again.publish(&frame[..2048]).expect("publish");
+        assert_eq!(b.try_recv().expect("receive").expect("a sample").bytes.as_ref(), &frame[..2048]);
+        assert_eq!(leased.bytes.as_ref(), frame.as_slice(), "still intact beside the new writer");
     }
 
     #[test]

@@ -59,7 +59,12 @@ impl ShmTransport {
         if cleaned.cleanups + cleaned.failed_cleanups > 0 {
             tracing::info!(cleaned = cleaned.cleanups, failed = cleaned.failed_cleanups, "dead iceoryx2 nodes");
         }
-        let lane = |channel: Channel| ShmLane::open(&format!("{prefix}/{}", channel.name()), id, settings);
+        let lane = |channel: Channel| {
+            // Only updates are leased: what the other channels carry (graph answers, calls) may be kept for long.
+            let leases = if channel == Channel::Updates { settings.leases } else { super::LeasePolicy::NEVER };
+            let settings = ShmSettings { leases, ..settings.clone() };
+            ShmLane::open(&format!("{prefix}/{}", channel.name()), id, &settings)
+        };
         let lanes = [lane(Channel::Updates)?, lane(Channel::Sync)?, lane(Channel::Calls)?, lane(Channel::Requests)?];
         let events = node
             .service_builder(&name)
