@@ -12,7 +12,7 @@ mod common;
 use std::process::Command;
 use std::time::Duration;
 
-use common::{Agent, converge, join, pause, seed_nodes, seed_path, signal, spawn_in, spawn_seeded};
+use common::{Agent, converge, join, pause, seed_nodes, seed_path, signal, spawn_in, spawn_seeded, workspace};
 
 /// Waits until `agent` knows `peers` same-host peers and has taken samples from the lanes.
 fn wait_on_lanes(agent: &mut Agent, peers: u64) {
@@ -50,6 +50,35 @@ fn same_host_agents_move_their_samples_through_shared_memory_through_a_join_a_ki
     converge(&mut [&mut seeded, &mut again, &mut writer], nodes + 5);
     wait_on_lanes(&mut writer, 2);
     wait_on_lanes(&mut seeded, 2);
+}
+
+/// Camera frames (360,960 B, above the lanes' lease size) are taken in place by the receivers: their writer is
+/// killed while its frames are leased, a receiver is paused while the writer's next life streams, and every agent
+/// still converges, with nothing refused and no receiver lost.
+#[test]
+fn camera_frames_taken_in_place_survive_their_writers_kill_and_a_paused_receiver() {
+    let prefix = format!("hybrid_c{}", std::process::id());
+    let domain = 84;
+    let nodes = seed_nodes();
+    let mut seeded = spawn_seeded(domain, &prefix);
+    seeded.wait_ready_with(nodes);
+    let mut reader = join(3, domain, &prefix, &[], nodes);
+    let log = workspace().join("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap");
+    let log = log.to_str().unwrap();
+    let mut writer = join(2, domain, &prefix, &["--role", "bridge", "--log", log, "--loops", "50"], nodes);
+    // Frames reach the receivers through the lanes and are taken in place.
+    let streaming = |s: &agent::StatusLine| s.shm_samples_leased > 20 && s.nodes > nodes;
+    reader.wait_for("frames through shared memory", Duration::from_secs(30), streaming, |_| false);
+    let frames = seeded.wait_for("frames through shared memory", Duration::from_secs(30), streaming, |_| false);
+
+    // Killed while the receivers hold its frames; a receiver paused while the writer's next life streams.
+    signal(&writer.child, "KILL");
+    let _ = writer.child.wait();
+    signal(&reader.child, "STOP");
+    let mut again = join(2, domain, &prefix, &["--role", "bridge", "--log", log, "--loops", "3"], frames.nodes);
+    again.wait_for("frames written", Duration::from_secs(30), |s| s.shm_samples_sent > 20, |_| false);
+    signal(&reader.child, "CONT");
+    converge(&mut [&mut seeded, &mut reader, &mut again], frames.nodes);
 }
 
 /// Two network namespaces joined by a veth pair, deleted when dropped.

@@ -427,6 +427,7 @@ impl<T: Transport + 'static> Agent<T> {
             participant_rebuilds: status.transport.participant_rebuilds,
             shm_samples_sent: status.transport.shm_samples_sent,
             shm_samples_received: status.transport.shm_samples_received,
+            shm_samples_leased: status.transport.shm_samples_leased,
             same_host_peers: status.transport.same_host_peers,
         }
     }

@@ -164,6 +164,9 @@ pub struct StatusLine {
     /// Of the samples received, those that came through same-host shared memory.
     #[serde(default)]
     pub shm_samples_received: u64,
+    /// Of those, samples taken in place rather than copied out of shared memory.
+    #[serde(default)]
+    pub shm_samples_leased: u64,
     /// Same-host peers reachable through shared memory now.
     #[serde(default)]
     pub same_host_peers: u64,

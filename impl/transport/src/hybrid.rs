@@ -279,6 +279,7 @@ impl Transport for HybridTransport {
                 .saturating_sub(load(&c.duplicates_bytes)),
             shm_samples_sent: load(&c.sent),
             shm_samples_received: load(&c.received),
+            shm_samples_leased: self.lane.as_ref().map_or(0, |lane| lane.stats().shm_samples_leased),
             same_host_duplicates: load(&c.duplicates),
             same_host_peers: self.shared.peers().len() as u64,
             ..rtps

@@ -258,6 +258,9 @@ pub struct TransportStats {
     /// Of the samples received, those that came through same-host shared memory.
     #[serde(default)]
     pub shm_samples_received: u64,
+    /// Of the samples received through shared memory, those taken in place rather than copied out ([`shm::lease`]).
+    #[serde(default)]
+    pub shm_samples_leased: u64,
     /// RTPS copies of samples a same-host peer also sent through shared memory, dropped on arrival ([`hybrid`]).
     #[serde(default)]
     pub same_host_duplicates: u64,

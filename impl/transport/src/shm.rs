@@ -199,6 +199,11 @@ impl ShmLane {
         self.leases.held()
     }
 
+    /// Received samples this lane has leased so far.
+    pub fn samples_leased(&self) -> u64 {
+        self.leases.taken()
+    }
+
     /// Publishes `bytes` to every subscriber of the lane on this host, written once into shared memory.
     ///
     /// # Errors
@@ -288,6 +293,7 @@ mod tests {
         assert_eq!(slice.as_ref(), &frame[10..20]);
         drop(slice);
         assert_eq!(b.leases_held(), 0);
+        assert_eq!(b.samples_leased(), 1);
     }
 
     #[test]

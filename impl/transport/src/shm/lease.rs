@@ -13,7 +13,7 @@
 //! readable.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 use bytes::Bytes;
 use iceoryx2::sample::Sample;
@@ -72,11 +72,18 @@ impl Drop for Lease {
 pub(super) struct Leases {
     policy: LeasePolicy,
     held: Arc<AtomicUsize>,
+    /// Samples leased so far.
+    taken: AtomicU64,
 }
 
 impl Leases {
     pub(super) fn new(policy: LeasePolicy) -> Self {
-        Leases { policy, held: Arc::new(AtomicUsize::new(0)) }
+        Leases { policy, held: Arc::new(AtomicUsize::new(0)), taken: AtomicU64::new(0) }
+    }
+
+    /// Samples leased so far.
+    pub(super) fn taken(&self) -> u64 {
+        self.taken.load(Ordering::Relaxed)
     }
 
     /// Leases held now.
@@ -94,6 +101,7 @@ impl Leases {
                 })
                 .is_ok();
         if reserved {
+            self.taken.fetch_add(1, Ordering::Relaxed);
             return Bytes::from_owner(Lease { sample, held: Arc::clone(&self.held) });
         }
         Bytes::copy_from_slice(sample.payload())

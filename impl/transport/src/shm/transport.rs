@@ -168,7 +168,12 @@ impl Transport for ShmTransport {
 
     fn stats(&self) -> TransportStats {
         let stats = self.counters.snapshot();
-        TransportStats { shm_samples_sent: stats.samples_sent, shm_samples_received: stats.samples_received, ..stats }
+        TransportStats {
+            shm_samples_sent: stats.samples_sent,
+            shm_samples_received: stats.samples_received,
+            shm_samples_leased: self.lanes.iter().map(ShmLane::samples_leased).sum(),
+            ..stats
+        }
     }
 }
 
