@@ -573,7 +573,8 @@ impl<T: Transport> Inner<T> {
     }
 
     fn signal(&self, changes: Vec<dsr::ChangeEvent>) {
-        if changes.is_empty() {
+        // No state lock and no signal for a change nobody listens to (every write and every joined delta comes here).
+        if changes.is_empty() || !self.signals.listened() {
             return;
         }
         let mine = self.lock().core.replica().map(Replica::id);

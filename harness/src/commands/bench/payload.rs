@@ -50,8 +50,8 @@ pub struct PayloadArgs {
     #[arg(long, default_value_t = PayloadPathsExperiment::default().count)]
     pub count: u32,
     /// Unmeasured samples of each size before the measured ones. Steady state for a large frame takes enough to
-    /// fill a receiver's 64 MiB anti-entropy history (e.g. 20 for 4 MiB); before it, received frames land in heap
-    /// pages never touched before.
+    /// fill a receiver's 64 MiB anti-entropy history (e.g. 20 for 4 MiB, 40 to be safe); before it, received frames
+    /// land in heap pages never touched before, or leased frames leave the writer shared-memory chunks never touched.
     #[arg(long, default_value_t = PayloadPathsExperiment::default().warmup)]
     pub warmup: u32,
     /// Samples per second.

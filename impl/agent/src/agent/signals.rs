@@ -35,6 +35,12 @@ pub(super) struct Signals {
 }
 
 impl Signals {
+    /// Whether anyone listens: a subscription or a callback. Without one, a change costs no signal at all.
+    pub(super) fn listened(&self) -> bool {
+        !self.subscribers.lock().unwrap_or_else(|p| p.into_inner()).is_empty()
+            || !self.callbacks.lock().unwrap_or_else(|p| p.into_inner()).is_empty()
+    }
+
     /// Signals a full subscription could not take, so far.
     pub(super) fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
@@ -46,12 +52,14 @@ impl Signals {
         // Copied out, so that a callback may register, remove or write (which signals again) without a deadlock.
         let callbacks: Vec<ChangeCallback> =
             self.callbacks.lock().unwrap_or_else(|p| p.into_inner()).iter().map(|(_, f)| Arc::clone(f)).collect();
-        let signals = changes.into_iter().map(|event| ChangeSignal {
-            origin: event.origin.map(AgentId::of_replica),
-            local: event.origin.is_some() && event.origin == mine,
-            change: event.change,
-        });
-        let signals: Vec<ChangeSignal> = signals.collect();
+        let signals: Vec<ChangeSignal> = changes
+            .into_iter()
+            .map(|event| ChangeSignal {
+                origin: event.origin.map(AgentId::of_replica),
+                local: event.origin.is_some() && event.origin == mine,
+                change: event.change,
+            })
+            .collect();
         {
             let mut subscribers = self.subscribers.lock().unwrap_or_else(|p| p.into_inner());
             for signal in &signals {

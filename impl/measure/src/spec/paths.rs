@@ -113,7 +113,8 @@ pub struct PayloadPathsExperiment {
     /// Unmeasured samples of each size before the measured ones, after the probes. A few settle discovery and the
     /// first allocations; steady state for a large frame takes enough to fill a receiver's anti-entropy history
     /// (`dsr::LogLimits::max_payload_bytes`, 64 MiB: 16 frames of 4 MiB), before which every received frame lands
-    /// in heap pages never touched before.
+    /// in heap pages never touched before, or, when it is leased in place (`transport::shm::lease`), the writer's
+    /// next frame in a shared-memory chunk never touched before.
     #[serde(default = "default_warmup")]
     pub warmup: u32,
 }

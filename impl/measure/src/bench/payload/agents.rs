@@ -208,7 +208,9 @@ pub(super) fn receive(link: Link, domain: u16, prefix: &str, index: u32) -> anyh
             let Some(agent) = weak.upgrade().filter(|_| from_source && !signal.local) else { return };
             let at = SystemClock.now_ns();
             let Some(value) = agent.attr(source, attrs::CAM_RGB).and_then(|b| seq_of(&b)) else { return };
-            match stamps.lock().unwrap_or_else(|p| p.into_inner()).take(value, at) {
+            // Taken under the lock, which is released before the answer: a failed answer records itself under it.
+            let heard = stamps.lock().unwrap_or_else(|p| p.into_inner()).take(value, at);
+            match heard {
                 Heard::Stop => drop(stop.try_send(())),
                 Heard::Answer(number) => {
                     if let Err(error) = agent.set_attr(me, attrs::CAM_RGB, payload_of(number, 8)) {
