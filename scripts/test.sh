@@ -44,4 +44,7 @@ else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
 cargo test --workspace --doc
-cargo test -p bica -p model -p harness --features mutants --all-targets
+# The planted bugs: the scheduler's and the model's tests with the mutation switch built in, and of the command's
+# tests only those that plant bugs (harness/tests/mutants.rs; the others ran above and would only run again).
+cargo test -p bica -p model --features mutants --all-targets
+cargo test -p harness --features mutants --test mutants

@@ -132,31 +132,3 @@ fn a_same_host_campaign_over_shared_memory_converges_after_every_process_fault()
     assert!(kinds.iter().all(|k| ["pause", "kill+restart", "late join"].contains(k)), "{kinds:?}");
     let _ = std::fs::remove_dir_all(&out);
 }
-
-/// The campaign catches a planted protocol bug on real processes: with announces lost after the first, nothing
-/// tells the agents what they missed during a partition once the writers stop, so some heal does not converge;
-/// the campaign stops there, says so and exits with code 3.
-#[cfg(feature = "mutants")]
-#[test]
-fn a_campaign_with_a_planted_protocol_bug_fails_with_exit_code_3() {
-    if !is_root() {
-        eprintln!("note: not root, so the chaos campaign (network namespaces, nftables) does not run");
-        return;
-    }
-    let out = std::env::temp_dir().join(format!("cortex-chaos-mutant-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
-    let output = Command::new(env!("CARGO_BIN_EXE_cortex"))
-        .args(["chaos", "--seed", "1", "--agents", "3", "--fault-ms", "1500", "--image-bytes", "4096"])
-        .args(["--settle-ms", "8000", "--domain", "45", "--plant", "AnnounceTimerLost", "--out"])
-        .arg(&out)
-        .output()
-        .expect("cortex runs");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert_eq!(output.status.code(), Some(3), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
-    assert!(stdout.contains("seed 1: FAILED") && stdout.contains("violation: no convergence"), "{stdout}");
-    let verdict: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("seed-1/verdict.json")).unwrap()).unwrap();
-    assert_eq!(verdict["passed"], false);
-    assert_eq!(verdict["config"]["plant"], "AnnounceTimerLost");
-    let _ = std::fs::remove_dir_all(&out);
-}
