@@ -572,6 +572,20 @@ impl<T: Transport> Inner<T> {
         }
     }
 
+    /// Publishes the deltas of a local write to every agent (never called with the state lock held). Each goes as
+    /// [`Message::delta_pieces`]: what [`crate::core::Written::sends`] would send, without first copying its large
+    /// values into one buffer, so a transport that writes into shared memory copies a camera frame once.
+    fn publish_written(&self, written: &crate::core::Written) {
+        for delta in &written.deltas {
+            let pieces = Message::delta_pieces(written.graph, written.from, delta);
+            let pieces: Vec<&[u8]> = pieces.iter().collect();
+            if let Err(error) = self.transport.publish_pieces(Channel::Updates, &pieces) {
+                self.publish_failures.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!("{}: publishing a delta message failed: {error}", self.me());
+            }
+        }
+    }
+
     fn signal(&self, changes: Vec<dsr::ChangeEvent>) {
         // No state lock and no signal for a change nobody listens to (every write and every joined delta comes here).
         if changes.is_empty() || !self.signals.listened() {

@@ -349,6 +349,14 @@ impl Message {
         (sample, message)
     }
 
+    /// The sample of a local delta in pieces: the envelope's fields and the delta's own bytes, with its large values
+    /// (a camera frame, a point cloud's columns) as pieces of their own that point into the delta
+    /// ([`dsr::Delta::encode_pieces`]). Concatenated, the pieces are [`Message::delta_sample`]'s sample; a transport
+    /// that writes into shared memory copies a frame once on its way ([`transport::Transport::publish_pieces`]).
+    pub fn delta_pieces(graph: GraphId, from: AgentId, delta: &dsr::Delta) -> dsr::Pieces<'_> {
+        delta.encode_pieces(put(header(K_DELTA, Some(graph)), &from.0))
+    }
+
     /// Encodes the message as a sample of graph `graph` (`None`: a joiner that names no graph; only for a graph
     /// request).
     pub fn encode(&self, graph: Option<GraphId>) -> Bytes {
@@ -562,7 +570,7 @@ mod tests {
         let mut replica = dsr::Replica::new(ReplicaId(7));
         let (id, _) = replica.insert_node(5, dsr::NewNode::new("camera", "cam")).unwrap();
         let frame = Bytes::from(vec![0xA5; 64 << 10]);
-        let delta = replica.set_attr(6, id, dsr::attrs::CAM_RGB, frame).unwrap();
+        let delta = replica.set_attr(6, id, dsr::attrs::CAM_RGB, frame.clone()).unwrap();
         let graph = G.unwrap();
         let (sample, message) = Message::delta_sample(graph, AgentId(3), &delta);
         assert_eq!(sample, message.encode(G), "the same bytes as encoding the message");
@@ -570,6 +578,9 @@ mod tests {
         let Message::Delta { delta: view, .. } = &message else { unreachable!() };
         let inside = sample.as_ptr_range();
         assert!(inside.contains(&view.as_ptr()), "the message's delta is a slice of the sample, not a copy");
+        let pieces = Message::delta_pieces(graph, AgentId(3), &delta);
+        assert_eq!(pieces.to_vec(), sample, "the pieces are the sample");
+        assert!(pieces.iter().any(|piece| piece.as_ptr() == frame.as_ptr()), "the frame is referred to, not copied");
     }
 
     #[test]

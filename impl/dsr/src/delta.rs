@@ -42,6 +42,9 @@ use crate::mutants::{DsrMutant, Plant};
 use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store};
 use crate::value::Value;
 
+mod pieces;
+pub use pieces::Pieces;
+
 /// The wire format version this build writes and reads (the header byte's upper five bits).
 pub const WIRE_VERSION: u8 = 1;
 
@@ -171,7 +174,30 @@ impl Delta {
 
     /// Appends the encoded delta to `out`.
     pub fn encode_into(&self, out: &mut Vec<u8>) {
-        self.borrowed().encode_into(out);
+        self.borrowed().encode_into(out, None);
+    }
+
+    /// Encodes the delta after `prefix` (an envelope's fields) without copying its large values: a byte value or a
+    /// numeric vector of [`Pieces::MIN_SHARED_BYTES`] or more stays where it is and the result refers to it. The
+    /// pieces, concatenated, are `prefix` followed by [`Delta::encode`]'s bytes; a transport that writes samples
+    /// into memory of its own (a shared-memory chunk) copies a camera frame once, from the delta, instead of twice.
+    ///
+    /// # Examples
+    /// ```
+    /// use dsr::{Delta, NewNode, Replica, ReplicaId, Value};
+    /// let mut a = Replica::new(ReplicaId(1));
+    /// let (id, _) = a.insert_node(10, NewNode::new("camera", "cam")).unwrap();
+    /// let frame = bytes::Bytes::from(vec![7u8; 64 * 1024]);
+    /// let delta = a.set_attrs(20, id, [("cam_rgb", Value::Bytes(frame.clone()))]).unwrap();
+    /// let pieces = delta.encode_pieces(b"envelope".to_vec());
+    /// assert!(pieces.iter().any(|piece| piece.as_ptr() == frame.as_ptr()), "the frame is referred to, not copied");
+    /// assert_eq!(pieces.to_vec(), [&b"envelope"[..], &delta.encode()].concat());
+    /// ```
+    pub fn encode_pieces(&self, prefix: Vec<u8>) -> Pieces<'_> {
+        let mut own = prefix;
+        let mut shared = Vec::new();
+        self.borrowed().encode_into(&mut own, Some(&mut shared));
+        Pieces::new(own, shared)
     }
 
     /// Decodes a delta from a shared buffer, as [`Delta::decode`] does, keeping large byte values (a camera frame) as
@@ -253,14 +279,17 @@ pub(crate) struct DeltaParts<'a> {
     pub(crate) plant: Plant,
 }
 
-impl DeltaParts<'_> {
+impl<'a> DeltaParts<'a> {
     /// Appends the encoded delta to `out` (the format of [`Delta::encode`]).
     ///
     /// The body is written straight from the store, item by item, with postcard's own serializer (so every number
     /// and string has postcard's encoding, and the bytes are those of the wire structures the layout describes);
     /// nothing is copied first. The header byte is written last, once the body has shown whether the clock must
     /// travel (it must when it is not the highest value stamp, which the body finds on the way).
-    pub(crate) fn encode_into(&self, out: &mut Vec<u8>) {
+    ///
+    /// With `shared`, a large value is not copied into `out`: its bytes are listed in `shared` at the position in
+    /// `out` where they belong ([`Pieces`]).
+    pub(crate) fn encode_into(&self, out: &mut Vec<u8>, shared: Option<&mut Vec<(usize, &'a [u8])>>) {
         let header_at = out.len();
         out.push(0);
         let mut body = Body {
@@ -268,6 +297,7 @@ impl DeltaParts<'_> {
             origin: self.origin,
             max_stamp: Stamp(0),
             plant: self.plant,
+            shared,
         };
         body.delta(self).expect("encoding into a Vec cannot fail");
         let Body { ser, max_stamp, .. } = body;
@@ -344,15 +374,17 @@ fn context(ser: &mut Ser<'_>, ctx: &CausalContext) -> postcard::Result<()> {
 }
 
 /// The body writer: knows the delta's origin (dots are written relative to it) and finds the highest value stamp.
-struct Body<'a> {
-    ser: Ser<'a>,
+struct Body<'o, 'v> {
+    ser: Ser<'o>,
     origin: Option<Origin>,
     max_stamp: Stamp,
     plant: Plant,
+    /// Where large values are listed instead of copied, if they are ([`Delta::encode_pieces`]).
+    shared: Option<&'o mut Vec<(usize, &'v [u8])>>,
 }
 
-impl Body<'_> {
-    fn delta(&mut self, delta: &DeltaParts<'_>) -> postcard::Result<()> {
+impl<'v> Body<'_, 'v> {
+    fn delta(&mut self, delta: &DeltaParts<'v>) -> postcard::Result<()> {
         let origin = self.origin;
         put(&mut self.ser, &origin.map(|o| (o.replica.0, o.first, (o.last - o.first + 1) as u32)))?;
         // The generated dots are implied by `origin`; the rest of the context travels explicitly.
@@ -420,7 +452,7 @@ impl Body<'_> {
         Ok(())
     }
 
-    fn attrs(&mut self, attrs: &Attrs) -> postcard::Result<()> {
+    fn attrs(&mut self, attrs: &'v Attrs) -> postcard::Result<()> {
         put_len(&mut self.ser, attrs.len())?;
         for (name, register) in attrs {
             let name = match Dictionary::builtin_attr_code(name) {
@@ -431,10 +463,24 @@ impl Body<'_> {
             put_len(&mut self.ser, register.values.len())?;
             for entry in &register.values {
                 self.entry_head(entry)?;
-                put(&mut self.ser, &entry.value)?;
+                self.value(&entry.value)?;
             }
         }
         Ok(())
+    }
+
+    /// A value: copied in, or, when large values are listed apart and this is one, its variant and length here and
+    /// its bytes listed at this position (postcard's encoding of a byte block either way).
+    fn value(&mut self, value: &'v Value) -> postcard::Result<()> {
+        match (&mut self.shared, value.wire_block()) {
+            (Some(shared), Some((variant, block))) if block.len() >= Pieces::MIN_SHARED_BYTES => {
+                put(&mut self.ser, &variant)?;
+                put_len(&mut self.ser, block.len())?;
+                shared.push((self.ser.output.0.len(), block));
+                Ok(())
+            }
+            _ => put(&mut self.ser, value),
+        }
     }
 }
 

@@ -227,6 +227,18 @@ impl Value {
             Value::F32x6(_) => 24,
         }
     }
+
+    /// A value whose wire form is its variant's index and one block of bytes in memory already (a byte value; a
+    /// numeric vector on a little-endian host): that index and block, exactly as the serializer writes them.
+    /// [`crate::Delta::encode_pieces`] refers to such a block instead of copying it.
+    pub(crate) fn wire_block(&self) -> Option<(u32, &[u8])> {
+        match self {
+            Value::Bytes(bytes) => Some((5, bytes)),
+            Value::VecF32(values) if cfg!(target_endian = "little") => Some((3, bytemuck::cast_slice(values))),
+            Value::VecU64(values) if cfg!(target_endian = "little") => Some((9, bytemuck::cast_slice(values))),
+            _ => None,
+        }
+    }
 }
 
 fn f32_bits_eq(a: &[f32], b: &[f32]) -> bool {

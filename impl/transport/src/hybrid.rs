@@ -196,9 +196,10 @@ impl HybridTransport {
         self.rtps.matched_readers(channel, |prefix| !peers.has_reader(prefix)) > 0
     }
 
-    /// Publishes `bytes` through the lane; `false` (after a warning) if the lane failed, so the caller uses RTPS.
-    fn through_lane(&self, lane: &ShmTransport, channel: Channel, bytes: &Bytes) -> bool {
-        match lane.publish(channel, bytes.clone()) {
+    /// Publishes the concatenation of `pieces` through the lane; `false` (after a warning) if the lane failed, so
+    /// the caller uses RTPS.
+    fn through_lane(&self, lane: &ShmTransport, channel: Channel, pieces: &[&[u8]]) -> bool {
+        match lane.publish_pieces(channel, pieces) {
             Ok(()) => {
                 self.shared.counters.sent.fetch_add(1, Ordering::Relaxed);
                 true
@@ -210,15 +211,27 @@ impl HybridTransport {
         }
     }
 
-    fn count_lane_only(&self, bytes: &Bytes) {
+    fn count_lane_only(&self, len: usize) {
         self.shared.counters.only_sent.fetch_add(1, Ordering::Relaxed);
-        self.shared.counters.only_sent_bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+        self.shared.counters.only_sent_bytes.fetch_add(len as u64, Ordering::Relaxed);
     }
 
-    /// The lane, if it is open, `bytes` fit it, and some peer of this host has said hello (a sample no one reads
-    /// is not copied into shared memory; a peer that has not said hello yet hears by RTPS meanwhile).
-    fn lane_for(&self, bytes: &Bytes) -> Option<&ShmTransport> {
-        self.lane.as_deref().filter(|_| bytes.len() <= self.shared.lane_max_bytes && !self.shared.peers().is_empty())
+    /// The lane, if it is open, a sample of `len` bytes fits it, and some peer of this host has said hello (a sample
+    /// no one reads is not copied into shared memory; a peer that has not said hello yet hears by RTPS meanwhile).
+    fn lane_for(&self, len: usize) -> Option<&ShmTransport> {
+        self.lane.as_deref().filter(|_| len <= self.shared.lane_max_bytes && !self.shared.peers().is_empty())
+    }
+
+    /// Publishes the concatenation of `pieces` through the lane when it can; returns whether that was all, i.e. it
+    /// went through the lane and no matched RTPS reader of `channel` is outside this host's peers.
+    fn lane_only(&self, channel: Channel, pieces: &[&[u8]]) -> bool {
+        let len = pieces.iter().map(|piece| piece.len()).sum();
+        let Some(lane) = self.lane_for(len) else { return false };
+        if !self.through_lane(lane, channel, pieces) || self.rtps_needed(channel) {
+            return false;
+        }
+        self.count_lane_only(len);
+        true
     }
 }
 
@@ -238,22 +251,27 @@ impl Transport for HybridTransport {
     }
 
     fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
-        if let Some(lane) = self.lane_for(&bytes)
-            && self.through_lane(lane, channel, &bytes)
-            && !self.rtps_needed(channel)
-        {
-            self.count_lane_only(&bytes);
+        if self.lane_only(channel, &[&bytes]) {
             return Ok(());
         }
         self.rtps.publish(channel, bytes)
     }
 
+    /// Through the lane, each piece copied once into shared memory; joined into one buffer only when RTPS takes the
+    /// sample too.
+    fn publish_pieces(&self, channel: Channel, pieces: &[&[u8]]) -> Result<(), TransportError> {
+        if self.lane_only(channel, pieces) {
+            return Ok(());
+        }
+        self.rtps.publish(channel, Bytes::from(pieces.concat()))
+    }
+
     fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
-        if let Some(lane) = self.lane_for(&bytes)
+        if let Some(lane) = self.lane_for(bytes.len())
             && self.shared.peers().has_endpoint(to)
-            && self.through_lane(lane, channel, &bytes)
+            && self.through_lane(lane, channel, &[&bytes])
         {
-            self.count_lane_only(&bytes);
+            self.count_lane_only(bytes.len());
             return Ok(());
         }
         self.rtps.publish_to(channel, bytes, to)

@@ -164,6 +164,18 @@ pub trait Transport: Send + Sync {
         self.publish(channel, bytes)
     }
 
+    /// Publishes the concatenation of `pieces` as one sample, like [`Transport::publish`]. A transport that writes
+    /// samples into memory of its own (a shared-memory chunk) copies each piece there once; by default the pieces
+    /// are first joined into one buffer (one copy), which is what every transport needs that hands a contiguous
+    /// buffer on (RTPS, the in-process bus). An agent publishes a local delta this way, with its large values as
+    /// pieces of their own (`dsr::Delta::encode_pieces`).
+    ///
+    /// # Errors
+    /// As [`Transport::publish`].
+    fn publish_pieces(&self, channel: Channel, pieces: &[&[u8]]) -> Result<(), TransportError> {
+        self.publish(channel, Bytes::from(pieces.concat()))
+    }
+
     /// The next received sample, if one is waiting.
     fn try_recv(&self) -> Option<Sample>;
 
@@ -206,6 +218,9 @@ impl<T: Transport + ?Sized> Transport for Arc<T> {
     }
     fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
         (**self).publish_to(channel, bytes, to)
+    }
+    fn publish_pieces(&self, channel: Channel, pieces: &[&[u8]]) -> Result<(), TransportError> {
+        (**self).publish_pieces(channel, pieces)
     }
     fn try_recv(&self) -> Option<Sample> {
         (**self).try_recv()

@@ -33,7 +33,7 @@ impl<T: Transport + 'static> Agent<T> {
             WriteRefusal::Op(source) => AgentError::Op { agent, source },
         })?;
         // Encoded here, with the lock released.
-        self.inner.send(written.sends(), None);
+        self.inner.publish_written(&written);
         self.inner.signal(written.changes);
         Ok(result)
     }

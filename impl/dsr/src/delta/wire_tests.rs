@@ -586,3 +586,31 @@ fn point_cloud_columns_decoded_from_a_shared_buffer_are_views_when_aligned_and_c
         assert_eq!(views, [1, 1, 1], "shifts at which each column was a view");
     }
 }
+
+/// A delta encoded in pieces is the prefix and the encoding once concatenated, for deltas and snapshots with values
+/// around the size that is shared; a value of that size or more is a piece of its own that points into the value
+/// (not a copy), a smaller one is copied in.
+#[test]
+fn pieces_concatenate_to_the_encoding_and_refer_to_the_large_values() {
+    let min = Pieces::MIN_SHARED_BYTES;
+    let mut writer = Replica::with_dictionary(ReplicaId(1), Dictionary::permissive());
+    let (camera, _) = writer.insert_node(1, NewNode::new("camera", "cam")).unwrap();
+    let (lidar, _) = writer.insert_node(2, NewNode::new("lidar", "ouster")).unwrap();
+    let (rt, _) = writer.insert_edge(3, lidar, camera, "RT", Vec::new()).unwrap();
+    for (now, size) in (3..).zip([min - 1, min, min + 1, 360_960]) {
+        let frame = bytes::Bytes::from(vec![size as u8; size]);
+        let floats = Value::VecF32((0..size / 4).map(|i| i as f32).collect());
+        let words = Value::VecU64((0..size / 8).map(|i| i as u64).collect());
+        let attrs = [("cam_rgb", Value::Bytes(frame.clone())), ("level", Value::I32(3)), ("cloud_x", floats)];
+        let delta = writer.set_attrs(now * 10, camera, attrs).unwrap();
+        let edge = writer.set_attrs(now * 10 + 1, rt.clone(), [("ids", words)]).unwrap();
+        for (delta, holds_frame) in [(delta, true), (edge, false), (Arc::new(writer.snapshot()), true)] {
+            let pieces = delta.encode_pieces(b"head".to_vec());
+            assert_eq!(pieces.to_vec(), [&b"head"[..], &delta.encode()].concat(), "size {size}");
+            assert_eq!(pieces.len(), 4 + delta.encode().len());
+            let refers = pieces.iter().filter(|piece| piece.as_ptr() == frame.as_ptr()).count();
+            let expected = usize::from(holds_frame && size >= min);
+            assert_eq!(refers, expected, "size {size}: a large frame is referred to, a small one copied in");
+        }
+    }
+}

@@ -97,7 +97,7 @@ impl Replica {
             plant: Plant::NONE,
         };
         let mut out = Vec::new();
-        parts.encode_into(&mut out);
+        parts.encode_into(&mut out, None);
         out
     }
 

@@ -114,19 +114,20 @@ impl Transport for ShmTransport {
     }
 
     fn publish(&self, channel: Channel, bytes: Bytes) -> Result<(), TransportError> {
+        self.publish_pieces(channel, &[&bytes])
+    }
+
+    fn publish_pieces(&self, channel: Channel, pieces: &[&[u8]]) -> Result<(), TransportError> {
         let lane = &self.lanes[channel.index()];
         let write = |detail: String| TransportError::Write { channel: channel.name(), detail };
-        match lane.publish(&bytes).map_err(|e| write(e.to_string()))? {
+        let size = pieces.iter().map(|piece| piece.len()).sum();
+        match lane.publish_pieces(pieces).map_err(|e| write(e.to_string()))? {
             ShmPublish::Sent { .. } => {}
             ShmPublish::TooLarge => {
-                return Err(TransportError::TooLarge {
-                    channel: channel.name(),
-                    size: bytes.len(),
-                    limit: self.max_sample_bytes,
-                });
+                return Err(TransportError::TooLarge { channel: channel.name(), size, limit: self.max_sample_bytes });
             }
         }
-        self.counters.sent(bytes.len(), bytes.len());
+        self.counters.sent(size, size);
         self.wake_others().map_err(|e| write(format!("wake-up notify: {e:?}")))
     }
 
