@@ -160,6 +160,7 @@ fn payload_paths() -> PayloadPathsResult {
         count: 20,
         rate_hz: 20.0,
         warmup: 3,
+        steady_max: 0,
     };
     let cell = |path: PayloadPath, p50_ns: u64, cpu: Option<f64>, loopback: Option<f64>| PayloadCell {
         path,

@@ -54,6 +54,11 @@ pub struct PayloadArgs {
     /// land in heap pages never touched before, or leased frames leave the writer shared-memory chunks never touched.
     #[arg(long, default_value_t = PayloadPathsExperiment::default().warmup)]
     pub warmup: u32,
+    /// Warm each size up to steady state, up to this many samples: a size whose frames fill a receiver's 64 MiB
+    /// anti-entropy history within it gets the samples that fill it (190 for 360,960 B) when they are more than
+    /// `--warmup`. 0: `--warmup` for every size.
+    #[arg(long, default_value_t = PayloadPathsExperiment::default().steady_max)]
+    pub steady_max: u32,
     /// Samples per second.
     #[arg(long, default_value_t = PayloadPathsExperiment::default().rate_hz)]
     pub rate_hz: f64,
@@ -95,6 +100,7 @@ pub(super) fn run(args: PayloadArgs) -> Result<()> {
         count: args.count,
         rate_hz: args.rate_hz,
         warmup: args.warmup,
+        steady_max: args.steady_max,
     };
     experiment.validate()?;
     let Some(counting) = enter_netns(args.netns, NetnsSetup { multicast: true })? else { return Ok(()) };

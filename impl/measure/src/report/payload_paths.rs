@@ -26,9 +26,9 @@ fn write(md: &mut String, r: &Results, _: &Context<'_>) {
          node, and each receiver process runs its own agent over the same link (`cortex agent --transport`). Raw \
          iceoryx2 (`transport::shm::limit`): the sample copied once into a loaned chunk and read in place by each \
          receiver, no agent — the same-host limit; memcpy: one copy of the size in this process. Every size goes \
-         through the same receivers in turn, after probes and {} warm-up samples.\n",
+         through the same receivers in turn, after probes and {}.\n",
         paths.join(", "),
-        result.experiment.warmup
+        warmup_text(&result.experiment)
     );
     let _ = writeln!(md, "{}.\n", table::heading(result));
     md.push_str(&table::markdown(result));
@@ -44,4 +44,23 @@ fn write(md: &mut String, r: &Results, _: &Context<'_>) {
         }
     }
     md.push('\n');
+}
+
+/// The warm-up of each size, in words.
+fn warmup_text(experiment: &crate::spec::PayloadPathsExperiment) -> String {
+    let steady: Vec<String> = experiment
+        .sizes
+        .iter()
+        .filter(|&&size| experiment.warmup_for(size) != experiment.warmup)
+        .map(|&size| format!("{} of {size} B", experiment.warmup_for(size)))
+        .collect();
+    match steady.as_slice() {
+        [] => format!("{} warm-up samples", experiment.warmup),
+        _ => format!(
+            "{} warm-up samples ({}: the samples that fill a receiver's 64 MiB anti-entropy history, so that the \
+             window is at steady state)",
+            experiment.warmup,
+            steady.join(", ")
+        ),
+    }
 }

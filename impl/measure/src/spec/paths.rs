@@ -117,7 +117,18 @@ pub struct PayloadPathsExperiment {
     /// next frame in a shared-memory chunk never touched before.
     #[serde(default = "default_warmup")]
     pub warmup: u32,
+    /// Warm-up to steady state, up to this many samples (0: off). A size whose frames fill a receiver's
+    /// anti-entropy history (64 MiB, [`dsr::LogLimits`]) within `steady_max` samples gets that many warm-up samples,
+    /// plus [`STEADY_MARGIN`], when that is more than `warmup` ([`PayloadPathsExperiment::warmup_for`]): 190 for a
+    /// 360,960 B camera frame, whose receivers otherwise copy every frame of the window into heap pages never
+    /// touched before. A long-running agent is in that steady state; `warmup` alone measures the first seconds.
+    #[serde(default)]
+    pub steady_max: u32,
 }
+
+/// Warm-up samples beyond those that fill the history ([`PayloadPathsExperiment::steady_max`]): the first
+/// allocations after the history starts evicting.
+pub const STEADY_MARGIN: u32 = 4;
 
 /// The default of [`PayloadPathsExperiment::warmup`].
 pub const DEFAULT_PAYLOAD_PATH_WARMUP: u32 = 3;
@@ -137,11 +148,21 @@ impl Default for PayloadPathsExperiment {
             count: 40,
             rate_hz: 20.0,
             warmup: DEFAULT_PAYLOAD_PATH_WARMUP,
+            steady_max: 0,
         }
     }
 }
 
 impl PayloadPathsExperiment {
+    /// The warm-up samples of `size` bytes: `warmup`, or, with [`PayloadPathsExperiment::steady_max`], the samples
+    /// that fill a receiver's anti-entropy history when those are more and at most `steady_max`.
+    pub fn warmup_for(&self, size: usize) -> u32 {
+        let history = dsr::LogLimits::default();
+        let fill = history.max_payload_bytes.div_ceil(size.max(1)).min(history.max_deltas);
+        let fill = u32::try_from(fill).unwrap_or(u32::MAX).saturating_add(STEADY_MARGIN);
+        if fill <= self.steady_max { self.warmup.max(fill) } else { self.warmup }
+    }
+
     /// Checks that the numbers make cells.
     ///
     /// # Errors
@@ -172,6 +193,11 @@ impl PayloadPathsExperiment {
             self.warmup
         );
         anyhow::ensure!(
+            self.steady_max <= MAX_PAYLOAD_PATH_COUNT,
+            "payload paths: a steady-state warm-up of up to {} samples (at most {MAX_PAYLOAD_PATH_COUNT})",
+            self.steady_max
+        );
+        anyhow::ensure!(
             self.rate_hz.is_finite() && self.rate_hz > 0.0,
             "payload paths: a rate of {} Hz is not a positive rate",
             self.rate_hz
@@ -193,6 +219,16 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_steady_warm_up_fills_the_history_for_frames_that_fill_it_soon_and_leaves_the_others_alone() {
+        let experiment = PayloadPathsExperiment { warmup: 40, steady_max: 200, ..PayloadPathsExperiment::default() };
+        assert_eq!(experiment.warmup_for(360_960), 186 + STEADY_MARGIN, "64 MiB of 360,960 B frames");
+        assert_eq!(experiment.warmup_for(4 << 20), 40, "16 frames fill it: the warm-up is longer already");
+        assert_eq!(experiment.warmup_for(16), 40, "4,096 deltas fill it: beyond the limit");
+        let off = PayloadPathsExperiment { steady_max: 0, ..experiment };
+        assert_eq!(off.warmup_for(360_960), 40);
+    }
+
+    #[test]
     fn every_path_is_found_by_its_own_name_and_read_back_from_its_json() {
         for path in PayloadPath::all() {
             assert_eq!(PayloadPath::from_name(path.name()), Some(path));
@@ -211,6 +247,7 @@ mod tests {
         let broken = [
             PayloadPathsExperiment { sizes: vec![], ..good.clone() },
             PayloadPathsExperiment { warmup: MAX_PAYLOAD_PATH_COUNT + 1, ..good.clone() },
+            PayloadPathsExperiment { steady_max: MAX_PAYLOAD_PATH_COUNT + 1, ..good.clone() },
             PayloadPathsExperiment { sizes: vec![7], ..good.clone() },
             PayloadPathsExperiment { sizes: vec![MAX_PAYLOAD_PATH_BYTES + 1], ..good.clone() },
             PayloadPathsExperiment { receivers: vec![0], ..good.clone() },

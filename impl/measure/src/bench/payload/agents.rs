@@ -135,7 +135,7 @@ pub(super) fn session(
     let mut windows = Vec::new();
     for &size in &experiment.sizes {
         writer.probe(size)?;
-        paced(experiment.warmup, experiment.rate_hz, |_| writer.write(size, PROBE).map(drop))?;
+        paced(experiment.warmup_for(size), experiment.rate_hz, |_| writer.write(size, PROBE).map(drop))?;
         let start = Mark::now(counting, &pids)?;
         let mut written = Vec::with_capacity(experiment.count as usize);
         paced(experiment.count, experiment.rate_hz, |i| {

@@ -44,7 +44,7 @@ pub(super) fn session(
             round += 1;
             sender.round(round, sample, &SystemClock, ROUND_TIMEOUT)
         };
-        paced(experiment.warmup, experiment.rate_hz, |_| Ok(send(&mut sample).map(drop)?))?;
+        paced(experiment.warmup_for(size), experiment.rate_hz, |_| Ok(send(&mut sample).map(drop)?))?;
         let start = Mark::now(counting, &pids)?;
         let mut latencies = latency::histogram();
         paced(experiment.count, experiment.rate_hz, |_| {
