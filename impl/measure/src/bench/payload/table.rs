@@ -74,6 +74,15 @@ pub fn notes(result: &PayloadPathsResult) -> Vec<String> {
             .to_owned(),
         "/iox: the agent figure over raw iceoryx2's for the same size and receivers (1.00 = the limit)".to_owned(),
     ];
+    let experiment = &result.experiment;
+    let fewest_receivers = experiment.receivers.iter().copied().min().unwrap_or(1);
+    if u64::from(experiment.count) * u64::from(fewest_receivers) < 100 {
+        notes.push(format!(
+            "p99 of a cell with fewer than 100 deliveries ({} samples to {fewest_receivers} receiver(s) here) is its \
+             slowest delivery, as its max is: one slow sample decides it",
+            experiment.count
+        ));
+    }
     notes.push(if result.netns {
         "loopback B/sample: bytes sent on the namespace's loopback over the window (every process of the run), per \
          sample"
