@@ -13,12 +13,24 @@ fn cortex_output(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_cortex")).args(args).output().expect("cortex runs")
 }
 
+/// Every mutant is checked by `model/tests/mutants.rs`; from the command line, the protocol mutants alone (`--only`),
+/// each killed with a counterexample, and a filter that names no mutant is refused with the list of names.
 #[test]
-fn every_mutant_is_killed_from_the_command_line() {
-    let out = cortex_output(&["check", "mutants", "--json"]);
+fn mutants_chosen_on_the_command_line_are_killed_and_an_unknown_name_is_refused() {
+    let out = cortex_output(&["check", "mutants", "--json", "--only", "agent::"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let results: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON results");
-    assert!(results.as_array().unwrap().iter().all(|r| r["killed"] == true));
+    let results = results.as_array().unwrap();
+    assert_eq!(results.len(), 6, "the six protocol mutants");
+    for result in results {
+        assert!(result["mutant"].as_str().unwrap().starts_with("agent::"), "{result}");
+        assert_eq!(result["killed"], true, "{result}");
+        assert!(!result["counterexample"]["actions"].as_array().unwrap().is_empty(), "{result}");
+    }
+    let out = cortex_output(&["check", "mutants", "--only", "agent::NoSuchBug"]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("agent::NoSuchBug") && stderr.contains("agent::AnnounceTimerLost"), "{stderr}");
 }
 
 /// The campaign catches a planted protocol bug on real processes: with announces lost after the first, nothing

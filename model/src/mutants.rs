@@ -97,10 +97,14 @@ pub fn mutant_options(progress: bool) -> CheckOptions {
     CheckOptions { search: Search::Bfs, threads: 1, timeout: None, progress }
 }
 
-/// Runs every replica mutant through the convergence model.
-pub fn check_dsr_mutants(progress: bool) -> Vec<MutantResult> {
+/// Which mutants to check: given a mutant's name (`dsr::…`, `bica::…`, `agent::…`), whether to check it.
+pub type Wanted<'a> = &'a dyn Fn(&str) -> bool;
+
+/// Runs the replica mutants `wanted` accepts through the convergence model.
+pub fn check_dsr_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
     dsr_mutant_configs()
         .into_iter()
+        .filter(|(mutant, _)| wanted(&format!("dsr::{mutant:?}")))
         .map(|(mutant, config)| {
             let report = check_convergence(&config, &mutant_options(progress));
             MutantResult::from_report(format!("dsr::{mutant:?}"), report)
@@ -108,10 +112,11 @@ pub fn check_dsr_mutants(progress: bool) -> Vec<MutantResult> {
         .collect()
 }
 
-/// Runs every scheduler mutant through the scheduler model.
-pub fn check_scheduler_mutants(progress: bool) -> Vec<MutantResult> {
+/// Runs the scheduler mutants `wanted` accepts through the scheduler model.
+pub fn check_scheduler_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
     scheduler_mutants()
         .into_iter()
+        .filter(|case| wanted(&format!("bica::{}", case.name)))
         .map(|case| {
             let report = check_scheduler(case.config, &mutant_options(progress));
             let mut result = MutantResult::from_report(format!("bica::{}", case.name), report);
@@ -158,10 +163,11 @@ pub fn agent_mutant_configs() -> Vec<(ProtocolMutant, AgentsConfig, &'static str
         .collect()
 }
 
-/// Runs every protocol mutant through the agents model.
-pub fn check_agent_mutants(progress: bool) -> Vec<MutantResult> {
+/// Runs the protocol mutants `wanted` accepts through the agents model.
+pub fn check_agent_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
     agent_mutant_configs()
         .into_iter()
+        .filter(|(mutant, _, _)| wanted(&format!("agent::{mutant:?}")))
         .map(|(mutant, config, property)| {
             let report = check_agents(&config, &mutant_options(progress));
             let mut result = MutantResult::from_report(format!("agent::{mutant:?}"), report);
@@ -175,8 +181,21 @@ pub fn check_agent_mutants(progress: bool) -> Vec<MutantResult> {
 
 /// Runs every mutant of the three models.
 pub fn check_all_mutants(progress: bool) -> Vec<MutantResult> {
-    let mut results = check_dsr_mutants(progress);
-    results.extend(check_scheduler_mutants(progress));
-    results.extend(check_agent_mutants(progress));
+    check_mutants(progress, &|_| true)
+}
+
+/// Runs the mutants of the three models that `wanted` accepts, in the order of [`mutant_names`].
+pub fn check_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
+    let mut results = check_dsr_mutants(progress, wanted);
+    results.extend(check_scheduler_mutants(progress, wanted));
+    results.extend(check_agent_mutants(progress, wanted));
     results
+}
+
+/// The name of every mutant, as [`MutantResult::mutant`] gives it: `dsr::…`, `bica::…`, `agent::…`.
+pub fn mutant_names() -> Vec<String> {
+    let dsr = dsr_mutant_configs().into_iter().map(|(mutant, _)| format!("dsr::{mutant:?}"));
+    let bica = scheduler_mutants().into_iter().map(|case| format!("bica::{}", case.name));
+    let agent = agent_mutant_configs().into_iter().map(|(mutant, _, _)| format!("agent::{mutant:?}"));
+    dsr.chain(bica).chain(agent).collect()
 }

@@ -152,6 +152,10 @@ struct MutantsArgs {
     /// Print the results as JSON.
     #[arg(long)]
     json: bool,
+    /// Check only the mutants whose name contains this text (`dsr::`, `bica::`, `agent::`, or a whole name such as
+    /// `agent::AnnounceTimerLost`); repeat for several. Without it, every mutant.
+    #[arg(long, value_name = "TEXT")]
+    only: Vec<String>,
 }
 
 /// Runs `cortex check`.
@@ -209,7 +213,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
             }
             finish(model::check_scheduler(config, &args.common.options()), args.common.json)
         }
-        CheckCommand::Mutants(args) => mutants(args.json),
+        CheckCommand::Mutants(args) => mutants(args.json, &args.only),
     }
 }
 
@@ -274,8 +278,16 @@ where
 }
 
 #[cfg(feature = "mutants")]
-fn mutants(json: bool) -> Result<()> {
-    let results = model::mutants::check_all_mutants(false);
+fn mutants(json: bool, only: &[String]) -> Result<()> {
+    let wanted = |name: &str| only.is_empty() || only.iter().any(|text| name.contains(text.as_str()));
+    if !model::mutants::mutant_names().iter().any(|name| wanted(name)) {
+        bail!(
+            "no mutant's name contains {}; the mutants are: {}",
+            only.join(" or "),
+            model::mutants::mutant_names().join(", ")
+        );
+    }
+    let results = model::mutants::check_mutants(false, &wanted);
     if json {
         println!("{}", serde_json::to_string_pretty(&results)?);
     } else {
@@ -303,7 +315,7 @@ fn mutants(json: bool) -> Result<()> {
 }
 
 #[cfg(not(feature = "mutants"))]
-fn mutants(_json: bool) -> Result<()> {
+fn mutants(_json: bool, _only: &[String]) -> Result<()> {
     bail!(
         "this build cannot plant mutants (they exist only behind the `mutants` feature); run \
          `cargo run --release -p harness --features mutants -- check mutants`"
