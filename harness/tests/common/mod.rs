@@ -43,9 +43,26 @@ impl Drop for Agent {
     }
 }
 
-/// The state directory of the agents of the graph with topic prefix `prefix` (see the module documentation).
+/// The state directory of the agents of the graph with topic prefix `prefix` (see the module documentation). The
+/// first call of a test process removes the state directories of earlier runs left untouched for an hour (a failed
+/// test's is kept that long for a look), so repeated runs do not pile them up in the temporary directory.
 pub fn state_dir(prefix: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("cortex-test-state-{prefix}"))
+    static SWEEP: std::sync::Once = std::sync::Once::new();
+    SWEEP.call_once(|| remove_state_dirs_older_than(Duration::from_secs(3600)));
+    std::env::temp_dir().join(format!("{STATE_DIR_PREFIX}{prefix}"))
+}
+
+const STATE_DIR_PREFIX: &str = "cortex-test-state-";
+
+fn remove_state_dirs_older_than(age: Duration) {
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
+    for entry in entries.flatten() {
+        let stale = entry.file_name().to_string_lossy().starts_with(STATE_DIR_PREFIX)
+            && entry.metadata().and_then(|m| m.modified()).is_ok_and(|at| at.elapsed().is_ok_and(|e| e > age));
+        if stale {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 /// Starts agent `id` on `domain` with the topic prefix `prefix`, printing its status every 100 ms.
