@@ -97,6 +97,18 @@ pub fn mutant_options(progress: bool) -> CheckOptions {
     CheckOptions { search: Search::Bfs, threads: 1, timeout: None, progress }
 }
 
+fn dsr_name(mutant: DsrMutant) -> String {
+    format!("dsr::{mutant:?}")
+}
+
+fn bica_name(case: &str) -> String {
+    format!("bica::{case}")
+}
+
+fn agent_name(mutant: ProtocolMutant) -> String {
+    format!("agent::{mutant:?}")
+}
+
 /// Which mutants to check: given a mutant's name (`dsr::…`, `bica::…`, `agent::…`), whether to check it.
 pub type Wanted<'a> = &'a dyn Fn(&str) -> bool;
 
@@ -104,10 +116,10 @@ pub type Wanted<'a> = &'a dyn Fn(&str) -> bool;
 pub fn check_dsr_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
     dsr_mutant_configs()
         .into_iter()
-        .filter(|(mutant, _)| wanted(&format!("dsr::{mutant:?}")))
+        .filter(|(mutant, _)| wanted(&dsr_name(*mutant)))
         .map(|(mutant, config)| {
             let report = check_convergence(&config, &mutant_options(progress));
-            MutantResult::from_report(format!("dsr::{mutant:?}"), report)
+            MutantResult::from_report(dsr_name(mutant), report)
         })
         .collect()
 }
@@ -116,10 +128,10 @@ pub fn check_dsr_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult
 pub fn check_scheduler_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
     scheduler_mutants()
         .into_iter()
-        .filter(|case| wanted(&format!("bica::{}", case.name)))
+        .filter(|case| wanted(&bica_name(case.name)))
         .map(|case| {
             let report = check_scheduler(case.config, &mutant_options(progress));
-            let mut result = MutantResult::from_report(format!("bica::{}", case.name), report);
+            let mut result = MutantResult::from_report(bica_name(case.name), report);
             // Report the property the mutant is meant to break first, when it is among the failures.
             if let Some(expected) = result.report.failures().find(|p| p.name == case.expected_property) {
                 result.counterexample = expected.path.clone();
@@ -167,10 +179,10 @@ pub fn agent_mutant_configs() -> Vec<(ProtocolMutant, AgentsConfig, &'static str
 pub fn check_agent_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
     agent_mutant_configs()
         .into_iter()
-        .filter(|(mutant, _, _)| wanted(&format!("agent::{mutant:?}")))
+        .filter(|(mutant, _, _)| wanted(&agent_name(*mutant)))
         .map(|(mutant, config, property)| {
             let report = check_agents(&config, &mutant_options(progress));
-            let mut result = MutantResult::from_report(format!("agent::{mutant:?}"), report);
+            let mut result = MutantResult::from_report(agent_name(mutant), report);
             if let Some(expected) = result.report.failures().find(|p| p.name == property) {
                 result.counterexample = expected.path.clone();
             }
@@ -194,8 +206,8 @@ pub fn check_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
 
 /// The name of every mutant, as [`MutantResult::mutant`] gives it: `dsr::…`, `bica::…`, `agent::…`.
 pub fn mutant_names() -> Vec<String> {
-    let dsr = dsr_mutant_configs().into_iter().map(|(mutant, _)| format!("dsr::{mutant:?}"));
-    let bica = scheduler_mutants().into_iter().map(|case| format!("bica::{}", case.name));
-    let agent = agent_mutant_configs().into_iter().map(|(mutant, _, _)| format!("agent::{mutant:?}"));
+    let dsr = dsr_mutant_configs().into_iter().map(|(mutant, _)| dsr_name(mutant));
+    let bica = scheduler_mutants().into_iter().map(|case| bica_name(case.name));
+    let agent = agent_mutant_configs().into_iter().map(|(mutant, _, _)| agent_name(mutant));
     dsr.chain(bica).chain(agent).collect()
 }
