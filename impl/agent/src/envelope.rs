@@ -268,6 +268,11 @@ impl Envelope {
     }
 }
 
+/// A delta message's envelope fields (header and sender), which the delta's own bytes follow.
+fn delta_fields(graph: Option<GraphId>, from: AgentId) -> Vec<u8> {
+    put(header(K_DELTA, graph), &from.0)
+}
+
 fn put<T: Serialize + ?Sized>(out: Vec<u8>, value: &T) -> Vec<u8> {
     postcard::to_extend(value, out).expect("encoding into a Vec cannot fail")
 }
@@ -341,7 +346,7 @@ impl Message {
     /// same buffer (no second copy of a camera frame). Returns the sample and the message it holds, whose delta is a
     /// slice of the sample; `message.encode(Some(graph))` gives the same bytes.
     pub fn delta_sample(graph: GraphId, from: AgentId, delta: &dsr::Delta) -> (Bytes, Message) {
-        let mut out = put(header(K_DELTA, Some(graph)), &from.0);
+        let mut out = delta_fields(Some(graph), from);
         let fields = out.len();
         delta.encode_into(&mut out);
         let sample = Bytes::from(out);
@@ -354,7 +359,7 @@ impl Message {
     /// ([`dsr::Delta::encode_pieces`]). Concatenated, the pieces are [`Message::delta_sample`]'s sample; a transport
     /// that writes into shared memory copies a frame once on its way ([`transport::Transport::publish_pieces`]).
     pub fn delta_pieces(graph: GraphId, from: AgentId, delta: &dsr::Delta) -> dsr::Pieces<'_> {
-        delta.encode_pieces(put(header(K_DELTA, Some(graph)), &from.0))
+        delta.encode_pieces(delta_fields(Some(graph), from))
     }
 
     /// Encodes the message as a sample of graph `graph` (`None`: a joiner that names no graph; only for a graph
@@ -363,7 +368,7 @@ impl Message {
         let header = |kind| header(kind, graph);
         let out = match self {
             Message::Delta { from, delta } => {
-                let mut out = put(header(K_DELTA), &from.0);
+                let mut out = delta_fields(graph, *from);
                 out.extend_from_slice(delta);
                 out
             }

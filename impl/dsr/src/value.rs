@@ -230,14 +230,16 @@ impl Value {
 
     /// A value whose wire form is its variant's index and one block of bytes in memory already (a byte value; a
     /// numeric vector on a little-endian host): that index and block, exactly as the serializer writes them.
-    /// [`crate::Delta::encode_pieces`] refers to such a block instead of copying it.
+    /// [`crate::Delta::encode_pieces`] refers to such a block instead of copying it. The variants are declared in
+    /// the order of their [`ValueType`] codes, so a variant's index is its code (the wire tests pin both).
     pub(crate) fn wire_block(&self) -> Option<(u32, &[u8])> {
-        match self {
-            Value::Bytes(bytes) => Some((5, bytes)),
-            Value::VecF32(values) if cfg!(target_endian = "little") => Some((3, bytemuck::cast_slice(values))),
-            Value::VecU64(values) if cfg!(target_endian = "little") => Some((9, bytemuck::cast_slice(values))),
-            _ => None,
-        }
+        let block: &[u8] = match self {
+            Value::Bytes(bytes) => bytes,
+            Value::VecF32(values) if cfg!(target_endian = "little") => bytemuck::cast_slice(values),
+            Value::VecU64(values) if cfg!(target_endian = "little") => bytemuck::cast_slice(values),
+            _ => return None,
+        };
+        Some((u32::from(self.value_type() as u8), block))
     }
 }
 
