@@ -1,7 +1,8 @@
 //! The hybrid transport's send and receive rules between transports of this process (issue 20): two hybrids find
 //! each other on their lanes and then move samples through shared memory alone (nothing more by RTPS); a plain RTPS
 //! transport beside them (a process without lanes, like another host) makes the writer send by RTPS as well, and
-//! the same-host reader still takes each sample once, dropping the RTPS copy. Claims on counts, never on speed.
+//! the same-host reader still takes each sample once, dropping the RTPS copy; a sample published in pieces arrives
+//! whole by both paths. Claims on counts, never on speed.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -78,4 +79,14 @@ fn same_host_hybrids_send_by_the_lane_alone_and_a_reader_without_lanes_gets_rtps
     assert_eq!(drain(&b, Duration::from_millis(500)), samples, "the same-host reader still gets each sample once");
     assert_eq!(a.stats().shm_samples_sent, 20);
     assert_eq!(b.stats().same_host_duplicates - duplicates_before, 10, "the RTPS copies were dropped");
+
+    // The same samples in pieces (as an agent publishes a delta with a camera frame): copied piece by piece into the
+    // lane, joined into one buffer for RTPS, which the other host needs.
+    for sample in &samples {
+        let (head, tail) = sample.split_at(300);
+        a.publish_pieces(Channel::Updates, &[head, tail]).unwrap();
+    }
+    assert_eq!(drain(&plain, Duration::from_millis(500)), samples, "the other host gets the pieces joined by RTPS");
+    assert_eq!(drain(&b, Duration::from_millis(500)), samples, "the same-host reader gets them joined, once");
+    assert_eq!(a.stats().shm_samples_sent, 30);
 }
