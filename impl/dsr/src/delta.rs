@@ -20,6 +20,13 @@
 //! 3. if flag `2`: the sender's clock stamp, 8 bytes little-endian;
 //! 4. if flag `4`: the applied operations (a version vector and out-of-order dots), postcard-encoded.
 //!
+//! A numeric vector of 4 KiB or more starts at a multiple of its element's size (4 bytes for `vec<f32>`, 8 for
+//! `vec<u64>`) from the start of the buffer the delta is encoded into, whatever precedes the delta there: its variant
+//! and length varints carry as many extra zero groups as that takes (`0x85 0x80 0x00` is 5, as `0x05` is, to postcard
+//! and to any LEB128 reader). A receiver whose buffer starts 8-aligned, as heap and shared-memory buffers do, reads
+//! such a vector in place ([`Delta::decode_shared`]). So the bytes of one delta depend on where it is encoded (all of
+//! them decode to the same delta), and everything else is postcard's shortest encoding.
+//!
 //! Nothing follows; [`Delta::decode`] refuses trailing bytes. Run recordings carry exactly these bytes as MCAP
 //! messages with message encoding `dsr-delta-v1` (version 1 of this layout).
 //!
@@ -172,14 +179,15 @@ impl Delta {
         out
     }
 
-    /// Appends the encoded delta to `out`.
+    /// Appends the encoded delta to `out`. Large numeric vectors are placed aligned from the start of `out` (see the
+    /// module documentation), so the bytes appended depend on `out.len() % 8`.
     pub fn encode_into(&self, out: &mut Vec<u8>) {
         self.borrowed().encode_into(out, None);
     }
 
     /// Encodes the delta after `prefix` (an envelope's fields) without copying its large values: a byte value or a
     /// numeric vector of [`Pieces::MIN_SHARED_BYTES`] or more stays where it is and the result refers to it. The
-    /// pieces, concatenated, are `prefix` followed by [`Delta::encode`]'s bytes; a transport that writes samples
+    /// pieces, concatenated, are what [`Delta::encode_into`] appends to `prefix`; a transport that writes samples
     /// into memory of its own (a shared-memory chunk) copies a camera frame once, from the delta, instead of twice.
     ///
     /// # Examples
@@ -191,7 +199,9 @@ impl Delta {
     /// let delta = a.set_attrs(20, id, [("cam_rgb", Value::Bytes(frame.clone()))]).unwrap();
     /// let pieces = delta.encode_pieces(b"envelope".to_vec());
     /// assert!(pieces.iter().any(|piece| piece.as_ptr() == frame.as_ptr()), "the frame is referred to, not copied");
-    /// assert_eq!(pieces.to_vec(), [&b"envelope"[..], &delta.encode()].concat());
+    /// let mut whole = b"envelope".to_vec();
+    /// delta.encode_into(&mut whole);
+    /// assert_eq!(pieces.to_vec(), whole);
     /// ```
     pub fn encode_pieces(&self, prefix: Vec<u8>) -> Pieces<'_> {
         let mut own = prefix;
@@ -203,8 +213,9 @@ impl Delta {
     /// Decodes a delta from a shared buffer, as [`Delta::decode`] does, keeping large byte values (a camera frame) as
     /// slices of `bytes` instead of copies: the receivers of one sample share its buffer. A byte value is shared when
     /// it is at least 4 KiB and a quarter of the buffer (so the values of a big snapshot are still copied, and one of
-    /// them kept for long does not hold the whole snapshot alive). Numeric vectors are always converted, one copy:
-    /// their wire form is little-endian bytes at any alignment.
+    /// them kept for long does not hold the whole snapshot alive). Numeric vectors are shared alike where their bytes
+    /// lie aligned in `bytes` (they do when `bytes` starts where the encoding's buffer started, at an 8-aligned
+    /// address) and are copied once otherwise ([`crate::value::Numbers`]).
     ///
     /// # Errors
     /// As [`Delta::decode`].
@@ -298,6 +309,7 @@ impl<'a> DeltaParts<'a> {
             max_stamp: Stamp(0),
             plant: self.plant,
             shared,
+            shared_bytes: 0,
         };
         body.delta(self).expect("encoding into a Vec cannot fail");
         let Body { ser, max_stamp, .. } = body;
@@ -381,6 +393,8 @@ struct Body<'o, 'v> {
     plant: Plant,
     /// Where large values are listed instead of copied, if they are ([`Delta::encode_pieces`]).
     shared: Option<&'o mut Vec<(usize, &'v [u8])>>,
+    /// The bytes listed in `shared` so far: the encoding's length is theirs and the output's.
+    shared_bytes: usize,
 }
 
 impl<'v> Body<'_, 'v> {
@@ -469,18 +483,57 @@ impl<'v> Body<'_, 'v> {
         Ok(())
     }
 
-    /// A value: copied in, or, when large values are listed apart and this is one, its variant and length here and
-    /// its bytes listed at this position (postcard's encoding of a byte block either way).
+    /// A value, in postcard's encoding. A byte value or numeric vector of [`Pieces::MIN_SHARED_BYTES`] or more is one
+    /// block after its variant and length, which are written so that the block starts aligned ([`aligned_head`]);
+    /// when large values are listed apart, the block is listed at its position instead of copied in.
     fn value(&mut self, value: &'v Value) -> postcard::Result<()> {
-        match (&mut self.shared, value.wire_block()) {
-            (Some(shared), Some((variant, block))) if block.len() >= Pieces::MIN_SHARED_BYTES => {
-                put(&mut self.ser, &variant)?;
-                put_len(&mut self.ser, block.len())?;
-                shared.push((self.ser.output.0.len(), block));
-                Ok(())
+        let Some(block) = value.wire_block().filter(|block| block.bytes.len() >= Pieces::MIN_SHARED_BYTES) else {
+            return put(&mut self.ser, value);
+        };
+        let out = &mut *self.ser.output.0;
+        aligned_head(out, self.shared_bytes, block.variant, block.bytes.len(), block.align);
+        match &mut self.shared {
+            Some(shared) => {
+                shared.push((out.len(), block.bytes));
+                self.shared_bytes += block.bytes.len();
             }
-            _ => put(&mut self.ser, value),
+            None => out.extend_from_slice(block.bytes),
         }
+        Ok(())
+    }
+}
+
+/// The longest varint postcard reads for a `u64` (and a `usize` on 64-bit hosts), and for a `u32`.
+const MAX_VARINT_BYTES_U64: usize = 10;
+const MAX_VARINT_BYTES_U32: usize = 5;
+
+/// Writes a block's variant index and length as postcard varints, so that the block written next starts at a
+/// multiple of `align` from the start of the output (`out`, plus `listed_apart` bytes of pieces not copied into it).
+/// The padding is extra zero groups at the end of the length's varint (and of the variant's, when the length's is at
+/// its longest): `0x85 0x80 0x00` is 5 as `0x05` is, and postcard reads both. A receiver whose buffer starts aligned
+/// (a heap or shared-memory buffer) can then read a numeric vector in place ([`crate::value::Numbers`]).
+fn aligned_head(out: &mut Vec<u8>, listed_apart: usize, variant: u32, len: usize, align: usize) {
+    let (variant, len) = (u64::from(variant), len as u64);
+    let at = out.len() + listed_apart + varint_bytes(variant) + varint_bytes(len);
+    let pad = (align - at % align) % align;
+    let len_pad = pad.min(MAX_VARINT_BYTES_U64 - varint_bytes(len));
+    let variant_pad = (pad - len_pad).min(MAX_VARINT_BYTES_U32 - varint_bytes(variant));
+    put_varint(out, variant, variant_pad);
+    put_varint(out, len, len_pad);
+}
+
+/// Bytes of `value`'s shortest varint.
+fn varint_bytes(value: u64) -> usize {
+    ((u64::BITS - value.leading_zeros()).max(1) as usize).div_ceil(7)
+}
+
+/// Writes `value` as a varint of its shortest length plus `extra` zero groups.
+fn put_varint(out: &mut Vec<u8>, mut value: u64, extra: usize) {
+    let groups = varint_bytes(value) + extra;
+    for index in 1..=groups {
+        let group = (value & 0x7f) as u8;
+        value >>= 7;
+        out.push(if index < groups { group | 0x80 } else { group });
     }
 }
 

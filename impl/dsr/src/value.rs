@@ -232,15 +232,25 @@ impl Value {
     /// numeric vector on a little-endian host): that index and block, exactly as the serializer writes them.
     /// [`crate::Delta::encode_pieces`] refers to such a block instead of copying it. The variants are declared in
     /// the order of their [`ValueType`] codes, so a variant's index is its code (the wire tests pin both).
-    pub(crate) fn wire_block(&self) -> Option<(u32, &[u8])> {
-        let block: &[u8] = match self {
-            Value::Bytes(bytes) => bytes,
-            Value::VecF32(values) if cfg!(target_endian = "little") => bytemuck::cast_slice(values),
-            Value::VecU64(values) if cfg!(target_endian = "little") => bytemuck::cast_slice(values),
+    pub(crate) fn wire_block(&self) -> Option<WireBlock<'_>> {
+        let (bytes, align): (&[u8], usize) = match self {
+            Value::Bytes(bytes) => (bytes, 1),
+            Value::VecF32(values) if cfg!(target_endian = "little") => (bytemuck::cast_slice(values), 4),
+            Value::VecU64(values) if cfg!(target_endian = "little") => (bytemuck::cast_slice(values), 8),
             _ => return None,
         };
-        Some((u32::from(self.value_type() as u8), block))
+        Some(WireBlock { variant: u32::from(self.value_type() as u8), bytes, align })
     }
+}
+
+/// A value's wire form as one block of bytes ([`Value::wire_block`]).
+pub(crate) struct WireBlock<'a> {
+    /// The variant's index (its [`ValueType`] code).
+    pub variant: u32,
+    /// The bytes, exactly as the serializer writes them after their length.
+    pub bytes: &'a [u8],
+    /// The alignment a receiver needs to read them in place (1 for bytes, the element's size for a vector).
+    pub align: usize,
 }
 
 fn f32_bits_eq(a: &[f32], b: &[f32]) -> bool {

@@ -2,6 +2,7 @@
 //! ([`crate::process`]): a sample's sequence number and delta decoded, applied, and the first application of every
 //! write stamped; and what a receiver reports when it stops.
 
+use bytes::Bytes;
 use dsr::{Delta, Digest, Replica};
 use transport::TransportStats;
 
@@ -57,9 +58,11 @@ impl Receiving {
         Receiving { replica, applied_at: vec![NOT_APPLIED; writes], applied: 0, refused: 0, probe_bytes: 0 }
     }
 
-    /// Handles one sample; `now` is read after the delta is applied.
-    pub fn on_sample(&mut self, bytes: &[u8], now: impl FnOnce() -> u64) -> Received {
-        let Some((header, body)) = bytes.split_first_chunk::<8>() else {
+    /// Handles one sample; `now` is read after the delta is applied. The delta is decoded as an agent decodes it
+    /// ([`Delta::decode_shared`]): its large values are slices of the sample's buffer, which in process is the one
+    /// buffer every receiver was handed.
+    pub fn on_sample(&mut self, bytes: &Bytes, now: impl FnOnce() -> u64) -> Received {
+        let Some((header, _)) = bytes.split_first_chunk::<8>() else {
             self.refused += 1;
             return Received::Refused;
         };
@@ -68,7 +71,8 @@ impl Receiving {
             self.probe_bytes += bytes.len() as u64;
             return Received::Probe;
         }
-        let ok = Delta::decode(body).ok().and_then(|delta| self.replica.apply(&delta).ok()).is_some();
+        let ok =
+            Delta::decode_shared(&bytes.slice(8..)).ok().and_then(|delta| self.replica.apply(&delta).ok()).is_some();
         let now = now();
         match usize::try_from(seq).ok().and_then(|seq| self.applied_at.get_mut(seq)) {
             Some(slot) if ok => {

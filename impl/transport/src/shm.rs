@@ -163,6 +163,8 @@ impl ShmLane {
             .service_builder(&name)
             .publish_subscribe::<[u8]>()
             .user_header::<EndpointHeader>()
+            // A payload starts 8-aligned, so a numeric vector a delta placed aligned is read in place when leased.
+            .payload_alignment(Alignment::ALIGN_8)
             .max_publishers(settings.max_endpoints)
             .max_subscribers(settings.max_endpoints)
             .max_nodes(settings.max_endpoints)
@@ -285,6 +287,7 @@ mod tests {
         let got = b.try_recv().expect("receive").expect("a sample");
         assert_eq!(got.origin, EndpointId(1));
         assert_eq!(got.bytes.as_ref(), frame.as_slice());
+        assert_eq!(got.bytes.as_ptr().align_offset(8), 0, "a payload starts 8-aligned");
         assert_eq!(a.try_recv().expect("receive"), None, "a lane skips its own samples");
         assert_eq!(b.try_recv().expect("receive"), None);
     }

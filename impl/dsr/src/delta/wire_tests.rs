@@ -550,41 +550,67 @@ fn a_frame_decoded_from_a_shared_buffer_is_a_slice_of_it_and_small_values_are_co
     }
 }
 
-/// A point cloud's columns decoded from a shared buffer are views of it (no copy per receiver) exactly when their
-/// bytes land aligned for `f32`, and copies otherwise; either way the same values. The wire does not pad vectors,
-/// so the test shifts the sample in its buffer by 0–3 bytes: each column is a view for exactly one of the shifts.
+/// A copy of `bytes` in a buffer of its own that starts `misalign` bytes past an 8-byte boundary, as shared.
+fn placed(bytes: &[u8], misalign: usize) -> bytes::Bytes {
+    let mut buffer = vec![0u8; bytes.len() + 16];
+    let start = buffer.as_ptr().align_offset(8) + misalign;
+    buffer[start..start + bytes.len()].copy_from_slice(bytes);
+    bytes::Bytes::from(buffer).slice(start..start + bytes.len())
+}
+
+/// A point cloud's columns are written at a multiple of their element's size from the start of the buffer the delta
+/// is encoded into, whatever comes before the delta there (an envelope of any length): decoded from a shared buffer
+/// that starts aligned, each column is a view of it (no copy per receiver); from one that does not, a copy of the
+/// same values. The padding is zero groups in varints, which postcard and the reference decoder read as the same
+/// numbers.
 #[test]
-fn point_cloud_columns_decoded_from_a_shared_buffer_are_views_when_aligned_and_copies_otherwise() {
-    let mut writer = Replica::new(ReplicaId(1));
+fn point_cloud_columns_land_aligned_and_are_views_of_an_aligned_buffer() {
+    let mut writer = Replica::with_dictionary(ReplicaId(1), Dictionary::permissive());
     let (lidar, _) = writer.insert_node(1, NewNode::new("lidar", "ouster")).unwrap();
     let column = |k: f32| Value::VecF32((0..16_384).map(|i| i as f32 * k).collect());
-    let columns = [("lidar_points_x", column(1.0)), ("lidar_points_y", column(-0.5)), ("lidar_points_z", column(0.25))];
+    let ids = Value::VecU64((0..4_096).map(|i| i * 3).collect());
+    let columns = [("x", column(1.0)), ("y", column(-0.5)), ("z", column(0.25)), ("ids", ids)];
     let delta = writer.set_attrs(2, lidar, columns.clone()).unwrap();
-    let encoded = delta.encode();
-    let mut views = [0usize; 3];
-    for shift in 0..4 {
-        let mut buffer = vec![0u8; shift];
-        buffer.extend_from_slice(&encoded);
-        let sample = bytes::Bytes::from(buffer).slice(shift..);
-        let decoded = Delta::decode_shared(&sample).unwrap();
-        assert_eq!(decoded, Delta::decode(&sample).unwrap());
-        let attrs = &decoded.store.nodes[&lidar].attrs;
-        for (k, (name, value)) in columns.iter().enumerate() {
-            let Value::VecF32(numbers) = &attrs[*name].values[0].value else { panic!("{name} is not a vec<f32>") };
-            assert_eq!(&Value::VecF32(numbers.clone()), value);
-            let inside = sample.as_ptr_range().contains(&numbers.as_ptr().cast());
-            assert_eq!(inside, numbers.is_view(), "{name}, shift {shift}");
-            // Where the column's bytes are in the sample (its first four floats are unique to it).
-            let head: Vec<u8> = numbers[..4].iter().flat_map(|v| v.to_le_bytes()).collect();
-            let at = sample.windows(16).position(|w| w == head.as_slice()).expect("the column is in the sample");
-            let aligned = sample[at..].as_ptr().align_offset(4) == 0;
-            assert_eq!(numbers.is_view(), aligned || !cfg!(target_endian = "little"), "{name}, shift {shift}");
-            views[k] += usize::from(numbers.is_view());
+    for before in 0..16 {
+        let mut sample = vec![0xEE; before];
+        delta.encode_into(&mut sample);
+        let encoded = &sample[before..];
+        assert_eq!(Delta::decode(encoded).unwrap(), *delta, "{before} bytes before");
+        assert_eq!(reference::decode(encoded).unwrap(), *delta, "{before} bytes before");
+        for misalign in [0, 1, 4] {
+            let buffer = placed(&sample, misalign);
+            let decoded = Delta::decode_shared(&buffer.slice(before..)).unwrap();
+            let attrs = &decoded.store.nodes[&lidar].attrs;
+            for (name, value) in &columns {
+                let got = &attrs[*name].values[0].value;
+                assert_eq!(got, value, "{name}");
+                let (view, align) = match got {
+                    Value::VecF32(numbers) => (numbers.is_view(), 4),
+                    Value::VecU64(numbers) => (numbers.is_view(), 8),
+                    other => panic!("{name} is {other:?}"),
+                };
+                let expected = misalign % align == 0 && cfg!(target_endian = "little");
+                assert_eq!(view, expected, "{name}: {before} bytes before, buffer {misalign} past alignment");
+            }
         }
     }
-    if cfg!(target_endian = "little") {
-        assert_eq!(views, [1, 1, 1], "shifts at which each column was a view");
+}
+
+/// The padded varints `aligned_head` writes are the numbers to postcard.
+#[test]
+fn padded_varints_read_as_their_numbers() {
+    for (value, extra) in [(0u64, 0), (5, 2), (127, 1), (128, 3), (65_536, 7), (u64::from(u32::MAX), 5)] {
+        let mut out = Vec::new();
+        super::put_varint(&mut out, value, extra);
+        assert_eq!(out.len(), super::varint_bytes(value) + extra);
+        assert_eq!(postcard::from_bytes::<u64>(&out).unwrap(), value, "{out:?}");
+        if out.len() <= 5 && u32::try_from(value).is_ok() {
+            assert_eq!(u64::from(postcard::from_bytes::<u32>(&out).unwrap()), value, "{out:?}");
+        }
     }
+    let mut five = Vec::new();
+    super::put_varint(&mut five, 5, 2);
+    assert_eq!(five, [0x85, 0x80, 0x00]);
 }
 
 /// A delta encoded in pieces is the prefix and the encoding once concatenated, for deltas and snapshots with values
@@ -606,8 +632,9 @@ fn pieces_concatenate_to_the_encoding_and_refer_to_the_large_values() {
         let edge = writer.set_attrs(now * 10 + 1, rt.clone(), [("ids", words)]).unwrap();
         for (delta, holds_frame) in [(delta, true), (edge, false), (Arc::new(writer.snapshot()), true)] {
             let pieces = delta.encode_pieces(b"head".to_vec());
-            assert_eq!(pieces.to_vec(), [&b"head"[..], &delta.encode()].concat(), "size {size}");
-            assert_eq!(pieces.len(), 4 + delta.encode().len());
+            let mut whole = b"head".to_vec();
+            delta.encode_into(&mut whole);
+            assert!(pieces.to_vec() == whole, "size {size}: the pieces are the prefix and the encoding after it");
             let refers = pieces.iter().filter(|piece| piece.as_ptr() == frame.as_ptr()).count();
             let expected = usize::from(holds_frame && size >= min);
             assert_eq!(refers, expected, "size {size}: a large frame is referred to, a small one copied in");

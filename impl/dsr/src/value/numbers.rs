@@ -5,8 +5,10 @@
 //! vector as a view of that buffer when all of these hold; otherwise it is copied once into an owned buffer:
 //! - this host is little-endian (the wire form is little-endian values);
 //! - the vector's bytes start at an address aligned for its element (4 bytes for `f32`, 8 for `u64`) and their
-//!   length is a whole number of elements. The wire format does not pad vectors, so whether a vector lands aligned
-//!   depends on where it sits in the sample and where the sample's buffer starts: decoders check, never assume;
+//!   length is a whole number of elements. An encoder places a vector of 4 KiB or more at a multiple of its
+//!   element's size from the start of its buffer ([`crate::Delta`]'s wire format), so it lands aligned when the
+//!   received buffer starts 8-aligned (heap buffers, shared-memory chunks) and the delta sits where it was encoded
+//!   in it; a buffer from elsewhere (an RTPS stack's receive buffer) may not be. Decoders check, never assume;
 //! - it is worth sharing: at least 4 KiB and at least an eighth of the buffer (a point cloud's four columns in one
 //!   delta are shared; the many small vectors of a snapshot are copied, so one of them kept for long never holds the
 //!   whole snapshot's buffer alive).
