@@ -21,11 +21,12 @@
 //! 4. if flag `4`: the applied operations (a version vector and out-of-order dots), postcard-encoded.
 //!
 //! A numeric vector of 4 KiB or more starts at a multiple of its element's size (4 bytes for `vec<f32>`, 8 for
-//! `vec<u64>`) from the start of the buffer the delta is encoded into, whatever precedes the delta there: its variant
-//! and length varints carry as many extra zero groups as that takes (`0x85 0x80 0x00` is 5, as `0x05` is, to postcard
-//! and to any LEB128 reader). A receiver whose buffer starts 8-aligned, as heap and shared-memory buffers do, reads
-//! such a vector in place ([`Delta::decode_shared`]). So the bytes of one delta depend on where it is encoded (all of
-//! them decode to the same delta), and everything else is postcard's shortest encoding.
+//! `vec<u64>`) from the start of the buffer the delta is encoded into, whatever precedes the delta there: its length
+//! and variant varints carry as many extra zero groups as that takes, up to 5 bytes each (`0x85 0x80 0x00` is 5, as
+//! `0x05` is, to postcard and to any LEB128 reader; a large `u64` vector is sometimes a byte short, see
+//! `aligned_head`). A receiver whose buffer starts 8-aligned, as heap and shared-memory buffers do, reads such a
+//! vector in place ([`Delta::decode_shared`]). So the bytes of one delta depend on where it is encoded (all of them
+//! decode to the same delta), and everything else is postcard's shortest encoding.
 //!
 //! Nothing follows; [`Delta::decode`] refuses trailing bytes. Run recordings carry exactly these bytes as MCAP
 //! messages with message encoding `dsr-delta-v1` (version 1 of this layout).
@@ -503,21 +504,25 @@ impl<'v> Body<'_, 'v> {
     }
 }
 
-/// The longest varint postcard reads for a `u64` (and a `usize` on 64-bit hosts), and for a `u32`.
-const MAX_VARINT_BYTES_U64: usize = 10;
-const MAX_VARINT_BYTES_U32: usize = 5;
+/// The longest padded varint written: the longest postcard reads for a `u32`, and for a `usize` on a 32-bit host.
+const MAX_PADDED_VARINT_BYTES: usize = 5;
 
 /// Writes a block's variant index and length as postcard varints, so that the block written next starts at a
 /// multiple of `align` from the start of the output (`out`, plus `listed_apart` bytes of pieces not copied into it).
-/// The padding is extra zero groups at the end of the length's varint (and of the variant's, when the length's is at
-/// its longest): `0x85 0x80 0x00` is 5 as `0x05` is, and postcard reads both. A receiver whose buffer starts aligned
-/// (a heap or shared-memory buffer) can then read a numeric vector in place ([`crate::value::Numbers`]).
+/// The padding is extra zero groups at the end of the length's varint, then of the variant's: `0x85 0x80 0x00` is 5
+/// as `0x05` is, and postcard reads both. Neither varint grows past 5 bytes, so the padding reaches 7 bytes while the
+/// length is under 16 KiB, 6 under 2 MiB and 5 under 256 MiB: an `f32` vector (at most 3) is always placed aligned,
+/// a `u64` one in 7 of 8 positions from 16 KiB and 6 of 8 from 2 MiB, the rest a byte or two short (then copied once
+/// on receipt).
+/// A receiver whose buffer starts aligned (a heap or shared-memory buffer) reads a vector placed aligned in place
+/// ([`crate::value::Numbers`]).
 fn aligned_head(out: &mut Vec<u8>, listed_apart: usize, variant: u32, len: usize, align: usize) {
     let (variant, len) = (u64::from(variant), len as u64);
     let at = out.len() + listed_apart + varint_bytes(variant) + varint_bytes(len);
     let pad = (align - at % align) % align;
-    let len_pad = pad.min(MAX_VARINT_BYTES_U64 - varint_bytes(len));
-    let variant_pad = (pad - len_pad).min(MAX_VARINT_BYTES_U32 - varint_bytes(variant));
+    let room = |value: u64| MAX_PADDED_VARINT_BYTES.saturating_sub(varint_bytes(value));
+    let len_pad = pad.min(room(len));
+    let variant_pad = (pad - len_pad).min(room(variant));
     put_varint(out, variant, variant_pad);
     put_varint(out, len, len_pad);
 }

@@ -567,8 +567,9 @@ fn placed(bytes: &[u8], misalign: usize) -> bytes::Bytes {
 fn point_cloud_columns_land_aligned_and_are_views_of_an_aligned_buffer() {
     let mut writer = Replica::with_dictionary(ReplicaId(1), Dictionary::permissive());
     let (lidar, _) = writer.insert_node(1, NewNode::new("lidar", "ouster")).unwrap();
-    let column = |k: f32| Value::VecF32((0..16_384).map(|i| i as f32 * k).collect());
-    let ids = Value::VecU64((0..4_096).map(|i| i * 3).collect());
+    // Columns of 16 KiB and, under the 16 KiB up to which a `u64` vector is always placed aligned, 12 KiB of ids.
+    let column = |k: f32| Value::VecF32((0..4_096).map(|i| i as f32 * k).collect());
+    let ids = Value::VecU64((0..1_536).map(|i| i * 3).collect());
     let columns = [("x", column(1.0)), ("y", column(-0.5)), ("z", column(0.25)), ("ids", ids)];
     let delta = writer.set_attrs(2, lidar, columns.clone()).unwrap();
     for before in 0..16 {
@@ -591,6 +592,42 @@ fn point_cloud_columns_land_aligned_and_are_views_of_an_aligned_buffer() {
                 };
                 let expected = misalign % align == 0 && cfg!(target_endian = "little");
                 assert_eq!(view, expected, "{name}: {before} bytes before, buffer {misalign} past alignment");
+            }
+        }
+    }
+}
+
+/// A block's head puts the block at a multiple of its alignment (always for 4, for 8 as far as 5-byte varints
+/// reach), keeps each varint within 5 bytes, and reads back as the variant and length, for lengths whose shortest
+/// varints take 2 to 4 bytes.
+#[test]
+fn a_block_head_aligns_what_follows_within_five_byte_varints() {
+    for len in [4_096usize, 16_383, 16_384, (1 << 21) - 1, 1 << 21, 1 << 27] {
+        for before in 0..8 {
+            for listed_apart in [0, 3] {
+                for align in [1, 4, 8] {
+                    let mut out = vec![0xEE; before];
+                    super::aligned_head(&mut out, listed_apart, 9, len, align);
+                    let head = &out[before..];
+                    let at = before + listed_apart + head.len();
+                    let reach = match len {
+                        ..16_384 => 8,
+                        ..0x20_0000 => 7,
+                        _ => 6,
+                    };
+                    let short = (align - (before + listed_apart + 1 + super::varint_bytes(len as u64)) % align) % align;
+                    let expected_aligned = short < reach;
+                    assert_eq!(
+                        at % align == 0,
+                        expected_aligned,
+                        "len {len}, {before}+{listed_apart} before, align {align}"
+                    );
+                    let (variant, rest) = postcard::take_from_bytes::<u32>(head).unwrap();
+                    assert!(head.len() - rest.len() <= 5, "the variant's varint");
+                    let (got, tail) = postcard::take_from_bytes::<u32>(rest).unwrap();
+                    assert!(rest.len() - tail.len() <= 5 && tail.is_empty(), "the length's varint");
+                    assert_eq!((variant, got as usize), (9, len));
+                }
             }
         }
     }

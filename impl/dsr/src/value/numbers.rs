@@ -8,7 +8,7 @@
 //!   length is a whole number of elements. An encoder places a vector of 4 KiB or more at a multiple of its
 //!   element's size from the start of its buffer ([`crate::Delta`]'s wire format), so it lands aligned when the
 //!   received buffer starts 8-aligned (heap buffers, shared-memory chunks) and the delta sits where it was encoded
-//!   in it; a buffer from elsewhere (an RTPS stack's receive buffer) may not be. Decoders check, never assume;
+//!   in it; a delta re-wrapped in another message (a repair list) may not. Decoders check, never assume;
 //! - it is worth sharing: at least 4 KiB and at least an eighth of the buffer (a point cloud's four columns in one
 //!   delta are shared; the many small vectors of a snapshot are copied, so one of them kept for long never holds the
 //!   whole snapshot's buffer alive).
