@@ -610,10 +610,12 @@ fn a_block_head_aligns_what_follows_within_five_byte_varints() {
                     super::aligned_head(&mut out, listed_apart, 9, len, align);
                     let head = &out[before..];
                     let at = before + listed_apart + head.len();
-                    let reach = match len {
-                        ..16_384 => 8,
-                        ..0x20_0000 => 7,
-                        _ => 6,
+                    let reach = if len < 16_384 {
+                        8
+                    } else if len < 0x20_0000 {
+                        7
+                    } else {
+                        6
                     };
                     let short = (align - (before + listed_apart + 1 + super::varint_bytes(len as u64)) % align) % align;
                     let expected_aligned = short < reach;
