@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use agent::{Agent, AgentConfig, AgentId, GraphId};
-use dsr::NewNode;
+use dsr::{NewNode, Numbers, Value, attrs};
 use transport::shm::{ShmSettings, ShmTransport};
 use transport::{Clock, EndpointId, ManualClock};
 
@@ -72,4 +72,29 @@ fn a_late_joiner_and_a_restarted_agent_get_the_graph_over_shared_memory() {
     rounds_until(&clock, &[&a, &back], "the new life has a's graph", || same_graph(&a, &back));
     back.insert_node(NewNode::new("object", "after-restart")).expect("write");
     rounds_until(&clock, &[&a, &back], "a has the new life's write", || same_graph(&a, &back));
+}
+
+/// A point cloud written by one agent is read in place by the other: its columns are views of the sample's buffer
+/// (the shared-memory chunk, leased), not copies. The envelope before the delta does not spoil their alignment, as
+/// the encoder places them from the sample's start.
+#[test]
+fn a_point_cloud_arrives_over_shared_memory_as_views_not_copies() {
+    let prefix = format!("cortex/test/{}/agents-cloud", std::process::id());
+    let clock = ManualClock::new(1_000_000_000);
+    let a = agent(&prefix, 1, 301, &clock);
+    let b = agent(&prefix, 2, 302, &clock);
+    rounds_until(&clock, &[&a, &b], "both ready", || a.is_ready() && b.is_ready());
+    let lidar = a.insert_node(NewNode::new("lidar", "ouster")).expect("write");
+    let column = |k: f32| -> Numbers<f32> { (0..65_536).map(|i| i as f32 * k).collect() };
+    let cloud = [("lidar_points_x", column(1.0)), ("lidar_points_y", column(-0.5)), ("lidar_points_z", column(0.25))];
+    a.set_attrs(lidar, cloud.iter().map(|(name, values)| (*name, Value::VecF32(values.clone())))).expect("write");
+    let has_cloud = || b.attr(lidar, attrs::LIDAR_POINTS_Z).is_some_and(|z| z.len() == 65_536);
+    rounds_until(&clock, &[&a, &b], "b has the cloud", has_cloud);
+    for (key, (name, values)) in
+        [attrs::LIDAR_POINTS_X, attrs::LIDAR_POINTS_Y, attrs::LIDAR_POINTS_Z].into_iter().zip(&cloud)
+    {
+        let got = b.attr(lidar, key).expect("the column");
+        assert_eq!(&got, values, "{name}");
+        assert!(got.is_view() || cfg!(target_endian = "big"), "{name} was copied on receipt");
+    }
 }
