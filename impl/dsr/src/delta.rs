@@ -507,6 +507,9 @@ impl<'v> Body<'_, 'v> {
 /// The longest padded varint written: the longest postcard reads for a `u32`, and for a `usize` on a 32-bit host.
 const MAX_PADDED_VARINT_BYTES: usize = 5;
 
+// A block is placed aligned from the size at which a receiver may keep it as a view: one threshold for both.
+const _: () = assert!(Pieces::MIN_SHARED_BYTES == crate::value::SHARE_MIN_BYTES);
+
 /// Writes a block's variant index and length as postcard varints, so that the block written next starts at a
 /// multiple of `align` from the start of the output (`out`, plus `listed_apart` bytes of pieces not copied into it).
 /// The padding is extra zero groups at the end of the length's varint, then of the variant's: `0x85 0x80 0x00` is 5
