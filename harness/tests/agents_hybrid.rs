@@ -66,8 +66,8 @@ fn camera_frames_taken_in_place_survive_their_writers_kill_and_a_paused_receiver
     let log = workspace().join("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap");
     let log = log.to_str().unwrap();
     let mut writer = join(2, domain, &prefix, &["--role", "bridge", "--log", log, "--loops", "50"], nodes);
-    // Frames reach the receivers through the lanes and are taken in place.
-    let streaming = |s: &agent::StatusLine| s.shm_samples_leased > 20 && s.nodes > nodes;
+    // Frames reach the receivers through the lanes, are taken in place, and are decoded in place (no copy on receipt).
+    let streaming = |s: &agent::StatusLine| s.shm_samples_leased > 20 && s.large_values_shared > 20 && s.nodes > nodes;
     reader.wait_for("frames through shared memory", Duration::from_secs(30), streaming, |_| false);
     let frames = seeded.wait_for("frames through shared memory", Duration::from_secs(30), streaming, |_| false);
 

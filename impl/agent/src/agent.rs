@@ -146,6 +146,8 @@ struct Inner<T> {
     rejected: AtomicU64,
     digest_mismatches: AtomicU64,
     gap_requests: AtomicU64,
+    /// Large values received, read in place from their sample (`.0`) or copied out of it (`.1`).
+    large_values: (AtomicU64, AtomicU64),
     publish_failures: AtomicU64,
     calls: Arc<CallTable>,
     service: CallService,
@@ -217,6 +219,7 @@ impl<T: Transport + 'static> Agent<T> {
             rejected: AtomicU64::new(0),
             digest_mismatches: AtomicU64::new(0),
             gap_requests: AtomicU64::new(0),
+            large_values: (AtomicU64::new(0), AtomicU64::new(0)),
             publish_failures: AtomicU64::new(0),
             calls: Arc::new(CallTable::new(config.max_calls_in_flight, nonce)),
             service: CallService::new(config.call_reply_outbox),
@@ -380,6 +383,8 @@ impl<T: Transport + 'static> Agent<T> {
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
             digest_mismatches: self.inner.digest_mismatches.load(Ordering::Relaxed),
             gap_requests: self.inner.gap_requests.load(Ordering::Relaxed),
+            large_values_shared: self.inner.large_values.0.load(Ordering::Relaxed),
+            large_values_copied: self.inner.large_values.1.load(Ordering::Relaxed),
             calls_served: self.inner.service.served.load(Ordering::Relaxed),
             call_replies_dropped: self.inner.service.dropped.load(Ordering::Relaxed),
             late_call_replies: self.inner.calls.late.load(Ordering::Relaxed),
@@ -429,6 +434,8 @@ impl<T: Transport + 'static> Agent<T> {
             shm_samples_received: status.transport.shm_samples_received,
             shm_samples_leased: status.transport.shm_samples_leased,
             same_host_peers: status.transport.same_host_peers,
+            large_values_shared: status.large_values_shared,
+            large_values_copied: status.large_values_copied,
         }
     }
 
@@ -738,6 +745,8 @@ impl<T: Transport> Inner<T> {
         for (what, error) in &decoded.rejected {
             self.reject(&origin, what, error);
         }
+        self.large_values.0.fetch_add(decoded.large.shared, Ordering::Relaxed);
+        self.large_values.1.fetch_add(decoded.large.copied, Ordering::Relaxed);
         let Some(input) = decoded.input else { return };
         let decoded_ns = self.clock.now_ns();
         let (out, answered) = {

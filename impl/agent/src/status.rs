@@ -83,6 +83,11 @@ pub struct AgentStatus {
     /// it had not been joined (a lost sample, or one overtaken in flight). Anti-entropy would find the gap at the
     /// next announce; this asks sooner.
     pub gap_requests: u64,
+    /// Large values received (byte values and numeric vectors of 4 KiB or more, [`dsr::LargeValues`]) that were
+    /// read in place from their sample's buffer: no copy on receipt.
+    pub large_values_shared: u64,
+    /// Large values received that were copied out of their sample (not aligned, or a small part of a large snapshot).
+    pub large_values_copied: u64,
     /// Call requests addressed to this agent (served, or answered with a fault).
     pub calls_served: u64,
     /// Call replies of this agent's server dropped because the reply outbox was full.
@@ -170,6 +175,12 @@ pub struct StatusLine {
     /// Same-host peers reachable through shared memory now.
     #[serde(default)]
     pub same_host_peers: u64,
+    /// Large values received that were read in place from their sample (see [`AgentStatus::large_values_shared`]).
+    #[serde(default)]
+    pub large_values_shared: u64,
+    /// Large values received that were copied out of their sample.
+    #[serde(default)]
+    pub large_values_copied: u64,
 }
 
 /// A command to an agent process, one line on its standard input (`cortex agent --control-stdin`): the other

@@ -97,4 +97,9 @@ fn a_point_cloud_arrives_over_shared_memory_as_views_not_copies() {
         assert_eq!(&got, values, "{name}");
         assert!(got.is_view() || cfg!(target_endian = "big"), "{name} was copied on receipt");
     }
+    // The receiver's status counts them so (the graph it joined with had no large values).
+    let status = b.status();
+    if cfg!(target_endian = "little") {
+        assert_eq!((status.large_values_shared, status.large_values_copied), (3, 0));
+    }
 }

@@ -51,7 +51,9 @@ use crate::store::{Attrs, EdgeEntry, Entry, NodeCore, NodeEntry, Register, Store
 use crate::value::Value;
 
 mod pieces;
+mod shared;
 pub use pieces::Pieces;
+pub use shared::LargeValues;
 
 /// The wire format version this build writes and reads (the header byte's upper five bits).
 pub const WIRE_VERSION: u8 = 1;

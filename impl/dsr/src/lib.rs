@@ -124,7 +124,7 @@ pub mod store;
 pub mod value;
 
 pub use causal::CausalContext;
-pub use delta::{Delta, Origin, Pieces};
+pub use delta::{Delta, LargeValues, Origin, Pieces};
 pub use dictionary::{AttrKey, Dictionary, attrs};
 pub use error::{DeltaError, DictionaryError, OpError};
 pub use ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId, Stamp};

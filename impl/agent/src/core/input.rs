@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use bytes::Bytes;
-use dsr::{CausalContext, Delta, ReplicaId};
+use dsr::{CausalContext, Delta, LargeValues, ReplicaId};
 
 use crate::AgentId;
 use crate::envelope::Message;
@@ -79,15 +79,21 @@ pub struct Decoded {
     pub input: Option<Input>,
     /// Payloads that did not decode, with what they were.
     pub rejected: Vec<(&'static str, String)>,
+    /// The decoded deltas' large values, by whether they stayed in the sample's buffer or were copied out of it.
+    pub large: LargeValues,
 }
 
 impl Input {
     /// Decodes the deltas of a protocol message (pure; never panics). Call messages give no input.
     pub fn decode(message: Message) -> Decoded {
         let mut rejected = Vec::new();
-        // Payloads are slices of the received sample: large byte values stay in its buffer (no copy per receiver).
+        let mut large = LargeValues::default();
+        // Payloads are slices of the received sample: large values stay in its buffer (no copy per receiver).
         let mut delta = |what: &'static str, bytes: &Bytes| match Delta::decode_shared(bytes) {
-            Ok(delta) => Some(Arc::new(delta)),
+            Ok(delta) => {
+                large += delta.large_values_in(bytes);
+                Some(Arc::new(delta))
+            }
             Err(error) => {
                 rejected.push((what, error.to_string()));
                 None
@@ -112,7 +118,7 @@ impl Input {
             }
             Message::CallRequest { .. } | Message::CallReply { .. } => None,
         };
-        Decoded { input, rejected }
+        Decoded { input, rejected, large }
     }
 
     /// The message kind's name (as [`Message::kind`]).
