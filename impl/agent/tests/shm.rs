@@ -34,17 +34,23 @@ fn rounds_until(clock: &ManualClock, agents: &[&ShmAgent], what: &str, done: imp
     panic!("not within 400 rounds: {what}");
 }
 
+/// Two agents on lanes named after `test`, with `nonces`, pumped until both are ready.
+fn two_ready(test: &str, nonces: [u64; 2]) -> (ManualClock, ShmAgent, ShmAgent) {
+    let prefix = format!("cortex/test/{}/{test}", std::process::id());
+    let clock = ManualClock::new(1_000_000_000);
+    let a = agent(&prefix, 1, nonces[0], &clock);
+    let b = agent(&prefix, 2, nonces[1], &clock);
+    rounds_until(&clock, &[&a, &b], "both ready", || a.is_ready() && b.is_ready());
+    (clock, a, b)
+}
+
 fn same_graph(a: &ShmAgent, b: &ShmAgent) -> bool {
     a.is_ready() && b.is_ready() && a.digest().is_some() && a.digest() == b.digest()
 }
 
 #[test]
 fn two_agents_over_shared_memory_converge_and_the_samples_went_through_it() {
-    let prefix = format!("cortex/test/{}/agents-converge", std::process::id());
-    let clock = ManualClock::new(1_000_000_000);
-    let a = agent(&prefix, 1, 101, &clock);
-    let b = agent(&prefix, 2, 102, &clock);
-    rounds_until(&clock, &[&a, &b], "both ready", || a.is_ready() && b.is_ready());
+    let (clock, a, b) = two_ready("agents-converge", [101, 102]);
     a.insert_node(NewNode::new("object", "cup").with_attr("pos_x", 1.0f32)).expect("write");
     b.insert_node(NewNode::new("object", "plate").with_attr("pos_x", 2.0f32)).expect("write");
     rounds_until(&clock, &[&a, &b], "equal graphs", || same_graph(&a, &b));
@@ -79,11 +85,7 @@ fn a_late_joiner_and_a_restarted_agent_get_the_graph_over_shared_memory() {
 /// the encoder places them from the sample's start.
 #[test]
 fn a_point_cloud_arrives_over_shared_memory_as_views_not_copies() {
-    let prefix = format!("cortex/test/{}/agents-cloud", std::process::id());
-    let clock = ManualClock::new(1_000_000_000);
-    let a = agent(&prefix, 1, 301, &clock);
-    let b = agent(&prefix, 2, 302, &clock);
-    rounds_until(&clock, &[&a, &b], "both ready", || a.is_ready() && b.is_ready());
+    let (clock, a, b) = two_ready("agents-cloud", [301, 302]);
     let lidar = a.insert_node(NewNode::new("lidar", "ouster")).expect("write");
     let column = |k: f32| -> Numbers<f32> { (0..65_536).map(|i| i as f32 * k).collect() };
     let cloud = [("lidar_points_x", column(1.0)), ("lidar_points_y", column(-0.5)), ("lidar_points_z", column(0.25))];

@@ -1,7 +1,7 @@
 //! [`LargeValues`]: how many of a decoded delta's large values share the buffer it was decoded from, and how many are
 //! copies, so that an agent can tell whether its frames and point clouds arrive without a copy.
 
-use crate::value::{SHARE_MIN_BYTES, Value};
+use crate::value::SHARE_MIN_BYTES;
 
 use super::Delta;
 
@@ -24,7 +24,8 @@ impl std::ops::AddAssign for LargeValues {
 
 impl Delta {
     /// Counts this delta's values of 4 KiB or more by whether their bytes lie inside `buffer` (the bytes it was
-    /// decoded from with [`Delta::decode_shared`]) or elsewhere (copies).
+    /// decoded from with [`Delta::decode_shared`]) or elsewhere (copies). Numeric vectors count on little-endian
+    /// hosts only, where their bytes are their wire form; elsewhere they are always copied and not counted.
     ///
     /// # Examples
     /// ```
@@ -43,17 +44,9 @@ impl Delta {
         let mut counts = LargeValues::default();
         let registers = self.store.nodes.values().flat_map(|node| node.attrs.values());
         let registers = registers.chain(self.store.edges.values().flat_map(|edge| edge.attrs.values()));
-        for entry in registers.flat_map(|register| register.values.iter()) {
-            let bytes: &[u8] = match &entry.value {
-                Value::Bytes(bytes) => bytes,
-                Value::VecF32(values) => bytemuck::cast_slice(values),
-                Value::VecU64(values) => bytemuck::cast_slice(values),
-                _ => continue,
-            };
-            if bytes.len() < SHARE_MIN_BYTES {
-                continue;
-            }
-            if inside.contains(&bytes.as_ptr()) {
+        let blocks = registers.flat_map(|register| register.values.iter()).filter_map(|entry| entry.value.wire_block());
+        for block in blocks.filter(|block| block.bytes.len() >= SHARE_MIN_BYTES) {
+            if inside.contains(&block.bytes.as_ptr()) {
                 counts.shared += 1;
             } else {
                 counts.copied += 1;

@@ -582,8 +582,12 @@ fn point_cloud_columns_land_aligned_and_are_views_of_an_aligned_buffer() {
             let buffer = placed(&sample, misalign);
             let decoded = Delta::decode_shared(&buffer.slice(before..)).unwrap();
             let (f32_views, u64_views) = (u64::from(misalign % 4 == 0), u64::from(misalign % 8 == 0));
-            let shared = if cfg!(target_endian = "little") { 3 * f32_views + u64_views } else { 0 };
-            let counted = LargeValues { shared, copied: 4 - shared };
+            let shared = 3 * f32_views + u64_views;
+            let counted = if cfg!(target_endian = "little") {
+                LargeValues { shared, copied: 4 - shared }
+            } else {
+                LargeValues::default()
+            };
             assert_eq!(decoded.large_values_in(&buffer), counted, "{before} bytes before, {misalign} past alignment");
             let attrs = &decoded.store.nodes[&lidar].attrs;
             for (name, value) in &columns {
