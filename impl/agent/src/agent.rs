@@ -28,6 +28,7 @@ use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Output, Send};
 use crate::envelope::{Envelope, Message};
 
 mod signals;
+mod timer;
 mod writes;
 
 pub use signals::CallbackId;
@@ -151,6 +152,10 @@ struct Inner<T> {
     publish_failures: AtomicU64,
     calls: Arc<CallTable>,
     service: CallService,
+    /// When the agent's thread next has periodic work, and its bell.
+    timer: timer::Timer,
+    /// Tells the replies thread to stop (it waits for replies with no timeout).
+    halt: (crossbeam_channel::Sender<()>, crossbeam_channel::Receiver<()>),
 }
 
 /// A DSR_d agent. Thread-safe: share it by reference or in an `Arc`.
@@ -223,6 +228,8 @@ impl<T: Transport + 'static> Agent<T> {
             publish_failures: AtomicU64::new(0),
             calls: Arc::new(CallTable::new(config.max_calls_in_flight, nonce)),
             service: CallService::new(config.call_reply_outbox),
+            timer: timer::Timer::default(),
+            halt: crossbeam_channel::bounded(1),
             config,
         };
         Ok(Agent { inner: Arc::new(inner), threads: Mutex::new(Vec::new()) })
@@ -230,63 +237,38 @@ impl<T: Transport + 'static> Agent<T> {
 
     /// An agent that runs on its own: samples are handled as they arrive — on the transport's receiving thread
     /// where the transport offers one ([`Transport::set_sink`], RTPS does), else on the agent's own thread — and
-    /// the agent's thread does the periodic work (announces, join retries, call replies).
+    /// the agent's thread does the periodic work (announces, join retries) when it is due; a third thread publishes
+    /// call replies as they come. An idle agent sleeps: its thread wakes when the protocol core's next deadline
+    /// comes (at most [`AgentConfig::announce_period`] apart once joined, sooner after a write), and the replies
+    /// thread only for a reply. `clock` must advance in real time, since the threads sleep until its deadlines.
     ///
     /// # Errors
     /// As [`Agent::new`], and [`AgentError::Thread`].
     pub fn start(config: AgentConfig, transport: T, clock: Arc<dyn Clock>) -> Result<Self, AgentError> {
         let agent = Agent::new(config, transport, clock)?;
-        let inner = Arc::clone(&agent.inner);
-        let tick = (agent.inner.config.join_retry.min(agent.inner.config.announce_period) / 4)
-            .clamp(Duration::from_millis(1), Duration::from_millis(50));
-        let handle = std::thread::Builder::new()
-            .name(format!("agent-{}", agent.inner.config.id.0))
-            .spawn(move || {
-                while !inner.stop.load(Ordering::Relaxed) {
-                    // While joining, look often: a graph request goes out as soon as discovery matches a peer.
-                    let wait = if inner.joined.load(Ordering::Relaxed) { tick } else { tick.min(JOINING_TICK) };
-                    if let Some(sample) = inner.transport.recv_timeout(wait) {
-                        inner.handle(sample);
-                        for _ in 0..1024 {
-                            let Some(sample) = inner.transport.try_recv() else { break };
-                            inner.handle(sample);
-                        }
-                    }
-                    inner.tick();
-                }
-            })
-            .map_err(|e| AgentError::Thread { agent: agent.inner.config.id, detail: e.to_string() })?;
-        agent.threads.lock().unwrap_or_else(|p| p.into_inner()).push(handle);
-        // Publishes the call replies of this agent's server as they come (the server never does I/O itself).
-        let inner = Arc::clone(&agent.inner);
-        let handle = std::thread::Builder::new()
-            .name(format!("agent-{}-replies", agent.inner.config.id.0))
-            .spawn(move || {
-                while !inner.stop.load(Ordering::Relaxed) {
-                    if let Ok(reply) = inner.service.outbox_rx.recv_timeout(tick) {
-                        let graph = inner.lock().core.graph();
-                        inner.send(
-                            vec![Send {
-                                channel: Channel::Calls,
-                                message: reply,
-                                dest: Dest::All,
-                                graph,
-                                sample: None,
-                            }],
-                            None,
-                        );
-                    }
-                }
-            })
-            .map_err(|e| AgentError::Thread { agent: agent.inner.config.id, detail: e.to_string() })?;
-        agent.threads.lock().unwrap_or_else(|p| p.into_inner()).push(handle);
         // Where the transport can, samples are handled on its receiving thread as they arrive: one thread hand-off
-        // less per sample than through the loop above, which then only does the periodic work (and handles what
+        // less per sample than through the agent's thread, which then only does the periodic work (and handles what
         // was queued before). The sink holds the agent's state; `shutdown` clears it.
         let inner = Arc::clone(&agent.inner);
         let sink: transport::Sink = Arc::new(move |sample| inner.handle(sample));
-        agent.inner.transport.set_sink(Some(sink));
+        let has_sink = agent.inner.transport.set_sink(Some(sink));
+        let inner = Arc::clone(&agent.inner);
+        agent.spawn("", move || inner.run(has_sink))?;
+        // Publishes the call replies of this agent's server as they come (the server never does I/O itself).
+        let inner = Arc::clone(&agent.inner);
+        agent.spawn("-replies", move || inner.publish_replies())?;
         Ok(agent)
+    }
+
+    /// Starts a thread named after this agent and `suffix`, joined by [`Agent::shutdown`].
+    fn spawn(&self, suffix: &str, body: impl FnOnce() + std::marker::Send + 'static) -> Result<(), AgentError> {
+        let agent = self.inner.config.id;
+        let handle = std::thread::Builder::new()
+            .name(format!("agent-{}{suffix}", agent.0))
+            .spawn(body)
+            .map_err(|e| AgentError::Thread { agent, detail: e.to_string() })?;
+        self.threads.lock().unwrap_or_else(|p| p.into_inner()).push(handle);
+        Ok(())
     }
 
     /// Handles every sample waiting on the transport, then does the periodic work due. Returns the samples
@@ -336,6 +318,8 @@ impl<T: Transport + 'static> Agent<T> {
     /// waits for both.
     pub fn shutdown(&self) {
         self.inner.stop.store(true, Ordering::SeqCst);
+        self.inner.timer.ring();
+        let _ = self.inner.halt.0.try_send(());
         // Waits for a sample being handled on the transport's thread, and releases the sink's hold on the state.
         self.inner.transport.set_sink(None);
         let handles = std::mem::take(&mut *self.threads.lock().unwrap_or_else(|p| p.into_inner()));
@@ -690,6 +674,49 @@ impl<T: Transport> Inner<T> {
         }
     }
 
+    /// The agent's own thread: sleeps until the periodic work is due (or, without a sink, until a sample arrives),
+    /// handles what is queued on the transport, does the work.
+    fn run(&self, has_sink: bool) {
+        // A transport without a sink cannot be rung out of its wait, so a write's earlier deadline waits for the
+        // next tick there; with a sink the thread sleeps on the timer's bell, which writes ring.
+        let tick = (self.config.join_retry.min(self.config.announce_period) / 4)
+            .clamp(Duration::from_millis(1), Duration::from_millis(50));
+        let longest = if has_sink { timer::IDLE_LONGEST } else { tick };
+        while !self.stop.load(Ordering::Relaxed) {
+            // While joining, look often: a graph request goes out as soon as discovery matches a peer.
+            let longest = if self.joined.load(Ordering::Relaxed) { longest } else { longest.min(JOINING_TICK) };
+            let wait = self.timer.wait_at(self.clock.now_ns(), longest);
+            let first = if has_sink {
+                self.timer.sleep(wait);
+                self.transport.try_recv()
+            } else {
+                self.transport.recv_timeout(wait)
+            };
+            if let Some(sample) = first {
+                self.handle(sample);
+                for _ in 0..1024 {
+                    let Some(sample) = self.transport.try_recv() else { break };
+                    self.handle(sample);
+                }
+            }
+            self.tick();
+        }
+    }
+
+    /// The replies thread: publishes each call reply of this agent's server as it comes, until halted.
+    fn publish_replies(&self) {
+        loop {
+            crossbeam_channel::select! {
+                recv(self.service.outbox_rx) -> reply => {
+                    let Ok(message) = reply else { return };
+                    let graph = self.lock().core.graph();
+                    self.send(vec![Send { channel: Channel::Calls, message, dest: Dest::All, graph, sample: None }], None);
+                }
+                recv(self.halt.1) -> _ => return,
+            }
+        }
+    }
+
     fn handle(&self, sample: Sample) {
         let received_ns = self.clock.now_ns();
         let origin = SampleOrigin(&sample);
@@ -752,6 +779,7 @@ impl<T: Transport> Inner<T> {
         let (out, answered) = {
             let mut locked = self.lock();
             let out = locked.core.handle(decoded_ns, graph, input);
+            self.timer.schedule(locked.core.next_deadline_ns());
             self.report(&mut locked, &out.events, &origin);
             if let (Some(bytes), true) = (answer_bytes, out.events.iter().any(|e| matches!(e, Event::Ready { .. }))) {
                 let timeline = &mut locked.timeline;
@@ -794,6 +822,7 @@ impl<T: Transport> Inner<T> {
                 locked.core.discovery_matched();
             }
             let out = locked.core.tick(now);
+            self.timer.reset(locked.core.next_deadline_ns());
             self.report(&mut locked, &out.events, &"this agent");
             if out.events.iter().any(|e| matches!(e, Event::Ready { .. })) {
                 locked.timeline.ready_ns = Some(now);

@@ -44,9 +44,6 @@ use crate::shm::{ShmSettings, ShmTransport};
 use crate::{Channel, Clock, EndpointId, Sample, Sink, Transport, TransportError, TransportStats};
 use peers::{HELLO_PERIOD_NS, Hello, Peers};
 
-/// The longest the lane thread waits for a sample before it looks at its stop flag and its hello timer.
-const LANE_WAIT: Duration = Duration::from_millis(100);
-
 /// The name prefix of the lanes of the graph on DDS domain `domain` with topic prefix `topic_prefix`, in this
 /// process's network namespace: `cortex/d<DOMAIN>/<PREFIX>/net<INODE>` (the namespace's inode from
 /// `/proc/self/ns/net`; without it, `net0`).
@@ -136,7 +133,8 @@ impl std::fmt::Debug for HybridTransport {
 
 impl HybridTransport {
     /// Opens the lanes named `lane_prefix` (see [`same_host_prefix`]), joins the DDS domain of `rtps`, and starts
-    /// the lane's receiving thread, which times hellos by `clock`. Lanes that cannot open give one warning and a
+    /// the lane's receiving thread, which times hellos by `clock` (a clock that advances in real time: the thread
+    /// sleeps until the next hello is due). Lanes that cannot open give one warning and a
     /// transport that is RTPS alone.
     ///
     /// # Errors
@@ -238,6 +236,9 @@ impl HybridTransport {
 impl Drop for HybridTransport {
     fn drop(&mut self) {
         self.shared.outlet.stop.store(true, Ordering::SeqCst);
+        if let Some(lane) = &self.lane {
+            lane.interrupt();
+        }
         self.rtps.set_sink(None);
         if let Some(thread) = self.lane_thread.take() {
             let _ = thread.join();
@@ -346,7 +347,8 @@ fn lane_loop(lane: &ShmTransport, rtps: &RtpsTransport, shared: &Shared, clock: 
             shared.peers().expire(now_ns);
             next_hello_ns = now_ns + HELLO_PERIOD_NS;
         }
-        let wait = Duration::from_nanos(next_hello_ns.saturating_sub(now_ns)).min(LANE_WAIT);
+        // Sleeps until a sample or the next hello; a stop interrupts the wait.
+        let wait = Duration::from_nanos(next_hello_ns.saturating_sub(now_ns));
         let Some(sample) = lane.recv_timeout(wait) else { continue };
         if sample.channel == Channel::Sync
             && let Some(said) = Hello::decode(&sample.bytes)

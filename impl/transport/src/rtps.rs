@@ -146,6 +146,8 @@ pub struct RtpsTransport {
     /// Where received samples go instead of the inbox, while set ([`Transport::set_sink`]); locked during a call.
     sink: Arc<Mutex<Option<Sink>>>,
     stop: Arc<AtomicBool>,
+    /// Wakes the receiving thread when `stop` is set.
+    bell: Arc<receive::StopBell>,
     receiver: Option<JoinHandle<()>>,
     counters: Arc<Counters>,
     unpaced_large_bytes: AtomicUsize,
@@ -206,6 +208,7 @@ impl RtpsTransport {
         let (sender, inbox) = bounded(config.inbox_capacity.max(1));
         let sink = Arc::new(Mutex::new(None));
         let stop = Arc::new(AtomicBool::new(false));
+        let bell = Arc::new(receive::StopBell::default());
         let counters = Arc::new(Counters::default());
         let receiver = {
             let outlet = Outlet { inbox: sender, sink: Arc::clone(&sink), counters: Arc::clone(&counters) };
@@ -217,10 +220,10 @@ impl RtpsTransport {
                 counters: Arc::clone(&counters),
                 last: None,
             };
-            let stop = Arc::clone(&stop);
+            let (stop, bell) = (Arc::clone(&stop), Arc::clone(&bell));
             std::thread::Builder::new()
                 .name("rtps-receive".into())
-                .spawn(move || receive_loop(reading, rebuild, outlet, &stop))
+                .spawn(move || receive_loop(reading, rebuild, outlet, &stop, &bell))
                 .map_err(|e| TransportError::Setup { what: "receiving thread".into(), detail: e.to_string() })?
         };
         Ok(RtpsTransport {
@@ -228,6 +231,7 @@ impl RtpsTransport {
             inbox,
             sink,
             stop,
+            bell,
             receiver: Some(receiver),
             counters,
             unpaced_large_bytes: AtomicUsize::new(0),
@@ -271,6 +275,7 @@ impl RtpsTransport {
 impl Drop for RtpsTransport {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::SeqCst);
+        self.bell.ring();
         if let Some(handle) = self.receiver.take() {
             let _ = handle.join();
         }

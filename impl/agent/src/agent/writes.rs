@@ -25,7 +25,12 @@ impl<T: Transport + 'static> Agent<T> {
     ) -> Result<R, AgentError> {
         let agent = self.inner.config.id;
         let now = self.inner.clock.now_ns();
-        let written = self.inner.lock().core.write(now, op);
+        let written = {
+            let mut locked = self.inner.lock();
+            let written = locked.core.write(now, op);
+            self.inner.timer.schedule(locked.core.next_deadline_ns());
+            written
+        };
         let (result, written) = written.map_err(|refusal| match refusal {
             WriteRefusal::ReadOnly => AgentError::ReadOnly(agent),
             WriteRefusal::NotJoined => AgentError::NotJoined(agent),

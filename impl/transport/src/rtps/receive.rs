@@ -62,6 +62,34 @@ impl Outlet {
     }
 }
 
+/// Wakes the receiving thread out of its `poll` when the transport stops, so that the thread can sleep until it
+/// has something to do (a sample, a discovery event, the engine check) instead of looking at the stop flag on a
+/// short timeout.
+#[derive(Default)]
+pub(super) struct StopBell(Mutex<Option<rustdds::mio1::Waker>>);
+
+/// The poll token of the [`StopBell`]'s waker.
+const STOP_TOKEN: rustdds::mio1::Token = rustdds::mio1::Token(usize::MAX);
+
+impl StopBell {
+    /// Wakes the thread's current `poll` (after the stop flag is set); nothing if it has none yet, since it looks
+    /// at the flag before its first.
+    pub(super) fn ring(&self) {
+        if let Some(waker) = self.0.lock().unwrap_or_else(|p| p.into_inner()).as_ref()
+            && let Err(error) = waker.wake()
+        {
+            tracing::warn!("rtps receive: cannot wake the receiving thread to stop: {error}");
+        }
+    }
+
+    /// Makes `poll` the one [`StopBell::ring`] wakes.
+    fn arm(&self, poll: &rustdds::mio1::Poll) -> std::io::Result<()> {
+        let waker = rustdds::mio1::Waker::new(poll.registry(), STOP_TOKEN)?;
+        *self.0.lock().unwrap_or_else(|p| p.into_inner()) = Some(waker);
+        Ok(())
+    }
+}
+
 /// Why [`serve`] returned.
 enum Ended {
     /// The transport is stopping (or its inbox is gone).
@@ -72,9 +100,15 @@ enum Ended {
 
 /// The receiving thread: serves the readers of the current generation and, when `rustdds`'s threads of it have
 /// ended, rebuilds the participants, writers and readers and serves the new ones.
-pub(super) fn receive_loop(mut reading: Reading, mut rebuild: Rebuild, outlet: Outlet, stop: &AtomicBool) {
+pub(super) fn receive_loop(
+    mut reading: Reading,
+    mut rebuild: Rebuild,
+    outlet: Outlet,
+    stop: &AtomicBool,
+    bell: &StopBell,
+) {
     loop {
-        let why = match serve(&mut reading, &outlet, stop) {
+        let why = match serve(&mut reading, &outlet, stop, bell) {
             Ended::Stopped => return,
             Ended::Broken(why) => why,
         };
@@ -100,12 +134,15 @@ pub(super) fn receive_loop(mut reading: Reading, mut rebuild: Rebuild, outlet: O
 
 /// Takes samples from `reading`'s readers until the transport stops or `rustdds`'s threads of this generation are
 /// found dead (checked every [`ENGINE_CHECK_PERIOD`], and soon after this thread's own `poll` was interrupted).
-fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool) -> Ended {
+fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool, bell: &StopBell) -> Ended {
     use rustdds::mio1::{Events, Interest, Poll, Token};
     let mut poll = match Poll::new() {
         Ok(poll) => poll,
         Err(error) => return Ended::Broken(format!("cannot create a poller: {error}")),
     };
+    if let Err(error) = bell.arm(&poll) {
+        return Ended::Broken(format!("cannot create the poller's stop waker: {error}"));
+    }
     let Reading { readers, watch, local, engine } = reading;
     for (index, (channel, reader)) in readers.iter_mut().enumerate() {
         if let Err(error) = poll.registry().register(reader, Token(index), Interest::READABLE) {
@@ -123,7 +160,9 @@ fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool) -> Ended {
     let mut events = Events::with_capacity(16);
     let mut next_check = Instant::now() + ENGINE_CHECK_PERIOD;
     while !stop.load(Ordering::Relaxed) {
-        match poll.poll(&mut events, Some(Duration::from_millis(20))) {
+        // Sleeps until a reader or discovery has something, the transport stops (the bell) or the engine check is due.
+        let until_check = next_check.saturating_duration_since(Instant::now());
+        match poll.poll(&mut events, Some(until_check)) {
             Ok(()) => {}
             Err(error) if error.kind() == std::io::ErrorKind::Interrupted => {
                 next_check = next_check.min(Instant::now() + ENGINE_CHECK_AFTER_EINTR);

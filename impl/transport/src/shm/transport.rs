@@ -108,6 +108,22 @@ impl ShmTransport {
     }
 }
 
+impl ShmTransport {
+    /// Makes a [`Transport::recv_timeout`] of this endpoint that is waiting return at once (empty-handed, unless a
+    /// sample came), or the next one if none waits: a thread that owns the receiving loop uses it to stop it
+    /// without waking it on a short timeout.
+    pub fn interrupt(&self) {
+        self.notifier.for_each_listener(|listener, details| {
+            if details.listener_id == self.listener_id
+                && let Err(error) = listener.notify()
+            {
+                tracing::warn!(?error, "shared-memory: cannot interrupt this endpoint's own wait");
+            }
+            CallbackProgression::Continue
+        });
+    }
+}
+
 impl Transport for ShmTransport {
     fn local_id(&self) -> EndpointId {
         self.id
