@@ -677,11 +677,11 @@ impl<T: Transport> Inner<T> {
     /// The agent's own thread: sleeps until the periodic work is due (or, without a sink, until a sample arrives),
     /// handles what is queued on the transport, does the work.
     fn run(&self, has_sink: bool) {
-        // A transport without a sink cannot be rung out of its wait, so a write's earlier deadline waits for the
-        // next tick there; with a sink the thread sleeps on the timer's bell, which writes ring.
+        // With a sink the thread sleeps on the timer's bell, which writes ring; without one it waits on the
+        // transport, which writes interrupt where it can ([`Transport::interrupt`]), and else wakes every tick.
         let tick = (self.config.join_retry.min(self.config.announce_period) / 4)
             .clamp(Duration::from_millis(1), Duration::from_millis(50));
-        let longest = if has_sink { timer::IDLE_LONGEST } else { tick };
+        let longest = if has_sink || self.transport.interrupt() { timer::IDLE_LONGEST } else { tick };
         while !self.stop.load(Ordering::Relaxed) {
             // While joining, look often: a graph request goes out as soon as discovery matches a peer.
             let longest = if self.joined.load(Ordering::Relaxed) { longest } else { longest.min(JOINING_TICK) };
@@ -779,7 +779,9 @@ impl<T: Transport> Inner<T> {
         let (out, answered) = {
             let mut locked = self.lock();
             let out = locked.core.handle(decoded_ns, graph, input);
-            self.timer.schedule(locked.core.next_deadline_ns());
+            // Handled on the transport's thread (a sink) this rings the agent's; handled on the agent's own, it
+            // ticks next anyway.
+            let _ = self.timer.schedule(locked.core.next_deadline_ns());
             self.report(&mut locked, &out.events, &origin);
             if let (Some(bytes), true) = (answer_bytes, out.events.iter().any(|e| matches!(e, Event::Ready { .. }))) {
                 let timeline = &mut locked.timeline;

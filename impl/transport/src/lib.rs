@@ -204,6 +204,15 @@ pub trait Transport: Send + Sync {
         let _ = sink;
         false
     }
+
+    /// Makes a [`Transport::recv_timeout`] that is waiting return at once (empty-handed unless a sample came), or
+    /// the next one if none waits, where the transport can; returns whether it can (by default it cannot, and a
+    /// caller that needs waking keeps its waits short). A thread that waits on the transport for samples and also
+    /// has other work is woken for that work this way (an agent's thread, when a write brings its next announce
+    /// closer).
+    fn interrupt(&self) -> bool {
+        false
+    }
 }
 
 /// A receiver of samples, called on a transport's receiving thread (see [`Transport::set_sink`]).
@@ -236,6 +245,9 @@ impl<T: Transport + ?Sized> Transport for Arc<T> {
     }
     fn set_sink(&self, sink: Option<Sink>) -> bool {
         (**self).set_sink(sink)
+    }
+    fn interrupt(&self) -> bool {
+        (**self).interrupt()
     }
 }
 

@@ -30,11 +30,14 @@ impl Default for Timer {
 
 impl Timer {
     /// After a core operation (under the state lock): the core's next deadline is `due_ns`. Rings the thread when
-    /// that is earlier than what it waits for.
-    pub(super) fn schedule(&self, due_ns: u64) {
-        if due_ns < self.due_ns.fetch_min(due_ns, Ordering::AcqRel) {
+    /// that is earlier than what it waits for, and says so (a thread waiting on its transport instead must be
+    /// interrupted there).
+    pub(super) fn schedule(&self, due_ns: u64) -> bool {
+        let earlier = due_ns < self.due_ns.fetch_min(due_ns, Ordering::AcqRel);
+        if earlier {
             self.ring();
         }
+        earlier
     }
 
     /// After the thread's own tick (under the state lock): the deadline is `due_ns`, which may be later than the
@@ -67,10 +70,10 @@ mod tests {
     fn an_earlier_deadline_rings_and_a_later_one_does_not() {
         let timer = Timer::default();
         timer.reset(1_000);
-        timer.schedule(5_000);
+        assert!(!timer.schedule(5_000));
         assert!(timer.bell.1.try_recv().is_err(), "a later deadline leaves the wait as it is");
         assert_eq!(timer.wait_at(400, IDLE_LONGEST), Duration::from_nanos(600));
-        timer.schedule(700);
+        assert!(timer.schedule(700));
         assert!(timer.bell.1.try_recv().is_ok(), "an earlier deadline rings");
         assert_eq!(timer.wait_at(400, IDLE_LONGEST), Duration::from_nanos(300));
         assert_eq!(timer.wait_at(900, IDLE_LONGEST), Duration::ZERO, "a passed deadline is due at once");

@@ -25,12 +25,15 @@ impl<T: Transport + 'static> Agent<T> {
     ) -> Result<R, AgentError> {
         let agent = self.inner.config.id;
         let now = self.inner.clock.now_ns();
-        let written = {
+        let (written, earlier) = {
             let mut locked = self.inner.lock();
             let written = locked.core.write(now, op);
-            self.inner.timer.schedule(locked.core.next_deadline_ns());
-            written
+            (written, self.inner.timer.schedule(locked.core.next_deadline_ns()))
         };
+        if earlier {
+            // The agent's thread may be waiting on the transport rather than on the timer's bell.
+            self.inner.transport.interrupt();
+        }
         let (result, written) = written.map_err(|refusal| match refusal {
             WriteRefusal::ReadOnly => AgentError::ReadOnly(agent),
             WriteRefusal::NotJoined => AgentError::NotJoined(agent),

@@ -90,6 +90,9 @@ impl ShmTransport {
     }
 }
 
+/// The event id of [`Transport::interrupt`]'s notification (a publish's wake-up has the default, 0).
+const INTERRUPT: EventId = EventId::new(1);
+
 impl ShmTransport {
     /// Wakes every endpoint's listener but this one's: a publish that also woke its own process's receiving
     /// thread cost a thread switch per sample, which on two cores competed with the receivers (`cortex bench rtt
@@ -105,22 +108,6 @@ impl ShmTransport {
             CallbackProgression::Continue
         });
         failed
-    }
-}
-
-impl ShmTransport {
-    /// Makes a [`Transport::recv_timeout`] of this endpoint that is waiting return at once (empty-handed, unless a
-    /// sample came), or the next one if none waits: a thread that owns the receiving loop uses it to stop it
-    /// without waking it on a short timeout.
-    pub fn interrupt(&self) {
-        self.notifier.for_each_listener(|listener, details| {
-            if details.listener_id == self.listener_id
-                && let Err(error) = listener.notify()
-            {
-                tracing::warn!(?error, "shared-memory: cannot interrupt this endpoint's own wait");
-            }
-            CallbackProgression::Continue
-        });
     }
 }
 
@@ -175,12 +162,29 @@ impl Transport for ShmTransport {
             }
             // A notification sent after the look above is kept by the listener, so the wait returns at once.
             let listener = self.listener.lock().unwrap_or_else(|p| p.into_inner());
-            if let Err(error) = listener.timed_wait(|_| {}, left) {
+            let mut interrupted = false;
+            if let Err(error) = listener.timed_wait(|event| interrupted |= event.id == INTERRUPT, left) {
                 tracing::warn!(?error, "shared-memory wake-up wait failed");
                 drop(listener);
                 std::thread::sleep(left.min(Duration::from_millis(1)));
             }
+            if interrupted {
+                return self.try_recv();
+            }
         }
+    }
+
+    /// Notifies this endpoint's own listener (which its publishes never do) with [`INTERRUPT`].
+    fn interrupt(&self) -> bool {
+        self.notifier.for_each_listener(|listener, details| {
+            if details.listener_id == self.listener_id
+                && let Err(error) = listener.notify_with_custom_event_id(INTERRUPT)
+            {
+                tracing::warn!(?error, "shared-memory: cannot interrupt this endpoint's own wait");
+            }
+            CallbackProgression::Continue
+        });
+        true
     }
 
     fn stats(&self) -> TransportStats {
@@ -235,6 +239,25 @@ mod tests {
         };
         assert!(woken(&b) && woken(&c), "every other endpoint is woken");
         assert!(!woken(&a), "the publisher's own listener is not");
+    }
+
+    #[test]
+    fn an_interrupt_ends_a_wait_at_once_and_only_its_own_endpoints() {
+        let prefix = format!("cortex/test/{}/interrupt", std::process::id());
+        let settings = ShmSettings { max_sample_bytes: 1 << 10, ..ShmSettings::default() };
+        let a = ShmTransport::open(&prefix, EndpointId(30), &settings).expect("a");
+        let b = ShmTransport::open(&prefix, EndpointId(31), &settings).expect("b");
+        assert!(a.interrupt(), "shared memory can be interrupted");
+        // Kept until a waits: this returns at once, empty-handed, instead of after an hour.
+        assert!(a.recv_timeout(Duration::from_secs(3600)).is_none());
+        // b was not interrupted: its wait runs its course.
+        let started = Instant::now();
+        assert!(b.recv_timeout(Duration::from_millis(50)).is_none());
+        assert!(started.elapsed() >= Duration::from_millis(50), "b's wait ended early");
+        // A sample that came before the interrupt is still handed out first.
+        b.publish(Channel::Sync, Bytes::from_static(b"first")).expect("publish");
+        a.interrupt();
+        assert_eq!(a.recv_timeout(Duration::from_secs(3600)).expect("the sample").bytes.as_ref(), b"first");
     }
 
     #[test]
