@@ -228,7 +228,7 @@ impl<T: Transport + 'static> Agent<T> {
             publish_failures: AtomicU64::new(0),
             calls: Arc::new(CallTable::new(config.max_calls_in_flight, nonce)),
             service: CallService::new(config.call_reply_outbox),
-            timer: timer::Timer::default(),
+            timer: timer::Timer::new(now, config.tick()),
             halt: crossbeam_channel::bounded(1),
             config,
         };
@@ -679,9 +679,7 @@ impl<T: Transport> Inner<T> {
     fn run(&self, has_sink: bool) {
         // With a sink the thread sleeps on the timer's bell, which writes ring; without one it waits on the
         // transport, which writes interrupt where it can ([`Transport::interrupt`]), and else wakes every tick.
-        let tick = (self.config.join_retry.min(self.config.announce_period) / 4)
-            .clamp(Duration::from_millis(1), Duration::from_millis(50));
-        let longest = if has_sink || self.transport.interrupt() { timer::IDLE_LONGEST } else { tick };
+        let longest = if has_sink || self.transport.interrupt() { timer::IDLE_LONGEST } else { self.config.tick() };
         while !self.stop.load(Ordering::Relaxed) {
             // While joining, look often: a graph request goes out as soon as discovery matches a peer.
             let longest = if self.joined.load(Ordering::Relaxed) { longest } else { longest.min(JOINING_TICK) };

@@ -101,6 +101,13 @@ impl AgentConfig {
         }
     }
 
+    /// The grid a threaded agent's own thread wakes on (a quarter of the shorter of `join_retry` and
+    /// `announce_period`, within 1–50 ms): the periodic work's precision, and a transport's longest wait when it
+    /// cannot be interrupted.
+    pub fn tick(&self) -> Duration {
+        (self.join_retry.min(self.announce_period) / 4).clamp(Duration::from_millis(1), Duration::from_millis(50))
+    }
+
     /// The protocol core's settings.
     pub fn protocol(&self) -> ProtocolConfig {
         ProtocolConfig {
