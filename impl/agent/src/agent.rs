@@ -239,8 +239,9 @@ impl<T: Transport + 'static> Agent<T> {
     /// where the transport offers one ([`Transport::set_sink`], RTPS does), else on the agent's own thread — and
     /// the agent's thread does the periodic work (announces, join retries) when it is due; a third thread publishes
     /// call replies as they come. An idle agent sleeps: its thread wakes when the protocol core's next deadline
-    /// comes (at most [`AgentConfig::announce_period`] apart once joined, sooner after a write), and the replies
-    /// thread only for a reply. `clock` must advance in real time, since the threads sleep until its deadlines.
+    /// comes (the next announce, or the quiet announce after a write; rounded up to [`AgentConfig::tick`], at most
+    /// 1 s apart), and the replies thread only for a reply. `clock` must advance in real time, since the threads
+    /// sleep until its deadlines.
     ///
     /// # Errors
     /// As [`Agent::new`], and [`AgentError::Thread`].
