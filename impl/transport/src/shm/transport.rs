@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use bytes::Bytes;
+use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::prelude::*;
 use iceoryx2::service::ipc_threadsafe;
 
@@ -163,10 +164,14 @@ impl Transport for ShmTransport {
             // A notification sent after the look above is kept by the listener, so the wait returns at once.
             let listener = self.listener.lock().unwrap_or_else(|p| p.into_inner());
             let mut interrupted = false;
-            if let Err(error) = listener.timed_wait(|event| interrupted |= event.id == INTERRUPT, left) {
-                tracing::warn!(?error, "shared-memory wake-up wait failed");
-                drop(listener);
-                std::thread::sleep(left.min(Duration::from_millis(1)));
+            match listener.timed_wait(|event| interrupted |= event.id == INTERRUPT, left) {
+                // A signal ended the wait (SIGCONT after a pause, every time): look again.
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(error) => {
+                    tracing::warn!(?error, "shared-memory wake-up wait failed");
+                    drop(listener);
+                    std::thread::sleep(left.min(Duration::from_millis(1)));
+                }
             }
             if interrupted {
                 return self.try_recv();
