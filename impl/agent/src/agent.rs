@@ -698,7 +698,11 @@ impl<T: Transport> Inner<T> {
                     self.handle(sample);
                 }
             }
-            self.tick();
+            // Woken before the deadline (rung, a sample): nothing periodic to do yet. While joining, every look
+            // also checks discovery for a new match.
+            if !self.joined.load(Ordering::Relaxed) || self.timer.is_due(self.clock.now_ns()) {
+                self.tick();
+            }
         }
     }
 
@@ -775,12 +779,12 @@ impl<T: Transport> Inner<T> {
         self.large_values.1.fetch_add(decoded.large.copied, Ordering::Relaxed);
         let Some(input) = decoded.input else { return };
         let decoded_ns = self.clock.now_ns();
-        let (out, answered) = {
+        let (out, answered, earlier) = {
             let mut locked = self.lock();
             let out = locked.core.handle(decoded_ns, graph, input);
-            // Handled on the transport's thread (a sink) this rings the agent's; handled on the agent's own, it
-            // ticks next anyway.
-            let _ = self.timer.schedule(locked.core.next_deadline_ns());
+            // Handled on the transport's thread (a sink), the agent's is rung below; handled on its own, the bell
+            // only makes its next sleep look again.
+            let earlier = self.timer.schedule(locked.core.next_deadline_ns());
             self.report(&mut locked, &out.events, &origin);
             if let (Some(bytes), true) = (answer_bytes, out.events.iter().any(|e| matches!(e, Event::Ready { .. }))) {
                 let timeline = &mut locked.timeline;
@@ -800,7 +804,7 @@ impl<T: Transport> Inner<T> {
                 }),
                 _ => None,
             });
-            (out, answered)
+            (out, answered, earlier)
         };
         self.send(out.sends, Some(sample.origin));
         if let Some(mut answer) = answered {
@@ -808,6 +812,9 @@ impl<T: Transport> Inner<T> {
             *self.last_answer.lock().unwrap_or_else(|p| p.into_inner()) = Some(answer);
         }
         self.signal(out.changes);
+        if earlier {
+            self.timer.ring();
+        }
     }
 
     /// Periodic work: graph requests while joining, starting alone after the wait, announces.

@@ -4,7 +4,9 @@
 //! The thread's periodic work is the protocol core's ([`crate::core::AgentCore::tick`]), and the core says when it
 //! is next due ([`crate::core::AgentCore::next_deadline_ns`]). Every thread that runs the core (a local write, a
 //! sample handled on the transport's thread, the tick itself) records that deadline here while it holds the state
-//! lock; one that moves it earlier than what the agent's thread waits for rings the thread awake.
+//! lock; one that moves it earlier than what the agent's thread waits for rings the thread awake, once it has
+//! released the lock and published (the deadline is at least the quiet period away, and a thread woken at once
+//! would compete with the publish for the CPU). A thread woken before its deadline only sleeps again.
 //!
 //! The thread wakes on a grid of its own (a tick apart, from when the agent started), at the first point at or after
 //! the deadline. A deadline is often a write's time plus the quiet period, and writes come on a grid of their own
@@ -38,15 +40,16 @@ impl Timer {
         Timer { due_ns: AtomicU64::new(0), bell: bounded(1), grid_ns: (origin_ns, step_ns) }
     }
 
-    /// After a core operation (under the state lock): the core's next deadline is `due_ns`. Rings the thread when
-    /// that is earlier than what it waits for, and says so (a thread waiting on its transport instead must be
-    /// interrupted there).
+    /// After a core operation (under the state lock): the core's next deadline is `due_ns`. Says whether that is
+    /// earlier than what the thread waits for: then the caller wakes it ([`Timer::ring`], or the transport's
+    /// interrupt for a thread waiting there) once it has released the lock.
     pub(super) fn schedule(&self, due_ns: u64) -> bool {
-        let earlier = due_ns < self.due_ns.fetch_min(due_ns, Ordering::AcqRel);
-        if earlier {
-            self.ring();
-        }
-        earlier
+        due_ns < self.due_ns.fetch_min(due_ns, Ordering::AcqRel)
+    }
+
+    /// Whether the deadline has come at `now_ns` (a thread woken sooner has nothing to do).
+    pub(super) fn is_due(&self, now_ns: u64) -> bool {
+        self.due_ns.load(Ordering::Acquire) <= now_ns
     }
 
     /// After the thread's own tick (under the state lock): the deadline is `due_ns`, which may be later than the
@@ -83,15 +86,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn an_earlier_deadline_rings_and_a_later_one_does_not() {
+    fn an_earlier_deadline_needs_a_wake_and_a_later_one_does_not() {
         let timer = Timer::new(0, Duration::from_nanos(1));
         timer.reset(1_000);
-        assert!(!timer.schedule(5_000));
-        assert!(timer.bell.1.try_recv().is_err(), "a later deadline leaves the wait as it is");
+        assert!(!timer.schedule(5_000), "a later deadline leaves the wait as it is");
         assert_eq!(timer.wait_at(400, IDLE_LONGEST), Duration::from_nanos(600));
-        assert!(timer.schedule(700));
-        assert!(timer.bell.1.try_recv().is_ok(), "an earlier deadline rings");
+        assert!(timer.schedule(700), "an earlier deadline needs the thread woken");
         assert_eq!(timer.wait_at(400, IDLE_LONGEST), Duration::from_nanos(300));
+        assert!(!timer.is_due(699) && timer.is_due(700));
         assert_eq!(timer.wait_at(900, IDLE_LONGEST), Duration::ZERO, "a passed deadline is due at once");
     }
 

@@ -30,10 +30,6 @@ impl<T: Transport + 'static> Agent<T> {
             let written = locked.core.write(now, op);
             (written, self.inner.timer.schedule(locked.core.next_deadline_ns()))
         };
-        if earlier {
-            // The agent's thread may be waiting on the transport rather than on the timer's bell.
-            self.inner.transport.interrupt();
-        }
         let (result, written) = written.map_err(|refusal| match refusal {
             WriteRefusal::ReadOnly => AgentError::ReadOnly(agent),
             WriteRefusal::NotJoined => AgentError::NotJoined(agent),
@@ -43,6 +39,11 @@ impl<T: Transport + 'static> Agent<T> {
         // Encoded here, with the lock released.
         self.inner.publish_written(&written);
         self.inner.signal(written.changes);
+        if earlier {
+            // On the bell, or on the transport where the thread waits there.
+            self.inner.timer.ring();
+            self.inner.transport.interrupt();
+        }
         Ok(result)
     }
 
