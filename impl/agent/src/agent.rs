@@ -129,7 +129,7 @@ impl std::fmt::Display for SampleOrigin<'_> {
     }
 }
 
-/// The receiving thread's longest wait while joining.
+/// The agent's thread's longest wait while joining (it looks at discovery for a new match each time).
 const JOINING_TICK: Duration = Duration::from_millis(2);
 
 struct Inner<T> {
