@@ -206,7 +206,9 @@ impl<T: Transport + 'static> Agent<T> {
                 None
             });
         }
-        let core = AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation }, seed, now);
+        let mut core = AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation }, seed, now);
+        // Nobody listens yet: a subscription or callback turns the report of changes on.
+        core.set_change_tracking(false);
         let state = Locked {
             core,
             sync_matches_seen: 0,
@@ -365,6 +367,7 @@ impl<T: Transport + 'static> Agent<T> {
             read_only: self.inner.config.read_only,
             rejected: self.inner.rejected.load(Ordering::Relaxed),
             signals_dropped: self.inner.signals.dropped(),
+            change_tracking: core.change_tracking(),
             publish_failures: self.inner.publish_failures.load(Ordering::Relaxed),
             digest_mismatches: self.inner.digest_mismatches.load(Ordering::Relaxed),
             gap_requests: self.inner.gap_requests.load(Ordering::Relaxed),
@@ -580,11 +583,26 @@ impl<T: Transport> Inner<T> {
 
     fn signal(&self, changes: Vec<dsr::ChangeEvent>) {
         // No state lock and no signal for a change nobody listens to (every write and every joined delta comes here).
-        if changes.is_empty() || !self.signals.listened() {
+        if changes.is_empty() {
             return;
+        }
+        if !self.signals.listened() {
+            // The last listener went (a dropped subscription is noticed as a signal fails to reach it).
+            return self.track_changes_if_listened();
         }
         let mine = self.lock().core.replica().map(Replica::id);
         self.signals.deliver(mine, changes);
+    }
+
+    /// Reports changes while someone listens, and stops looking for them when nobody does: the look before and
+    /// after every write and join is a good part of their cost (`AgentCore::set_change_tracking`). Decided under
+    /// the state lock, where a new listener turns it on after registering, so the last word is always right.
+    fn track_changes_if_listened(&self) {
+        let mut locked = self.lock();
+        let listened = self.signals.listened();
+        if locked.core.change_tracking() != listened {
+            locked.core.set_change_tracking(listened);
+        }
     }
 
     fn reject(&self, origin: &dyn std::fmt::Display, what: &str, error: &dyn std::fmt::Display) {

@@ -112,6 +112,8 @@ pub struct AgentCore {
     peers: BTreeSet<AgentId>,
     /// Graph requests answered recently, by (joiner, nonce), with the time.
     answered: BTreeMap<(AgentId, u64), u64>,
+    /// Whether the replica queues its visible changes for [`Output::changes`] (on unless turned off).
+    change_tracking: bool,
     seed: Unhashed<Option<CortexGraph>>,
     caches: Unhashed<Caches>,
 }
@@ -139,6 +141,7 @@ impl AgentCore {
             pending_ask: None,
             peers: BTreeSet::new(),
             answered: BTreeMap::new(),
+            change_tracking: true,
             seed: Unhashed(seed),
             caches: Unhashed(Caches::default()),
         }
@@ -226,6 +229,21 @@ impl AgentCore {
     /// The replica, once ready.
     pub fn replica(&self) -> Option<&Replica> {
         self.replica.as_ref()
+    }
+
+    /// Turns the report of visible changes ([`Output::changes`], [`Written::changes`]) on or off, now and for the
+    /// replica a join makes later. Off, a write or a join skips the before-and-after look at what it touches: an
+    /// agent whose changes nobody listens to turns it off.
+    pub fn set_change_tracking(&mut self, on: bool) {
+        self.change_tracking = on;
+        if let Some(replica) = self.replica.as_mut() {
+            replica.set_change_tracking(on);
+        }
+    }
+
+    /// Whether visible changes are reported ([`AgentCore::set_change_tracking`]).
+    pub fn change_tracking(&self) -> bool {
+        self.change_tracking
     }
 
     /// Whether the life has its replica.

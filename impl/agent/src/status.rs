@@ -74,6 +74,9 @@ pub struct AgentStatus {
     pub rejected: u64,
     /// Change signals dropped because a subscriber's channel was full.
     pub signals_dropped: u64,
+    /// Whether the replica looks for the visible changes of each write and join: while a subscription or change
+    /// callback is registered (a dropped subscription counts until the next change finds it gone).
+    pub change_tracking: bool,
     /// Publishes that failed (the local state is kept; anti-entropy repairs).
     pub publish_failures: u64,
     /// Times a peer had joined the same operations but showed another graph digest (a replica bug; repaired with

@@ -110,3 +110,45 @@ fn a_removed_callback_is_not_called_again_and_removing_twice_says_so() {
     assert_eq!(pos_x_updates(&seen).len(), 1);
     assert_eq!(b.attr(id, attrs::POS_X), Some(2.0f32), "the agent still joins what it no longer reports");
 }
+
+#[test]
+fn changes_are_looked_for_only_while_someone_listens() {
+    let (a, b, clock) = pair();
+    assert!(!b.status().change_tracking, "nobody listens to a new agent");
+    let id = a.insert_node(NewNode::new("object", "cup")).unwrap();
+    steps(&[&a, &b], &clock, 5);
+
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let log = Arc::clone(&seen);
+    let callback = b.on_change(move |signal| log.lock().unwrap().push(signal.clone()));
+    assert!(b.status().change_tracking, "a callback turns the look on");
+    a.set_attr(id, attrs::POS_X, 1.0f32).unwrap();
+    steps(&[&a, &b], &clock, 3);
+    assert_eq!(pos_x_updates(&seen).len(), 1);
+
+    assert!(b.remove_on_change(callback));
+    assert!(!b.status().change_tracking, "removing the last callback turns it off");
+
+    let subscription = b.subscribe(16);
+    assert!(b.status().change_tracking, "a subscription turns it on");
+    a.set_attr(id, attrs::POS_X, 2.0f32).unwrap();
+    steps(&[&a, &b], &clock, 3);
+    let got: Vec<ChangeSignal> = subscription.try_iter().collect();
+    let pos_x = |s: &ChangeSignal| matches!(&s.change, Change::AttrUpdated { element: Element::Node(n), name } if *n == id && name.as_str() == "pos_x");
+    assert!(got.iter().any(pos_x), "{got:?}");
+
+    drop(subscription);
+    assert!(b.status().change_tracking, "a dropped subscription is found at the next change");
+    for x in [3.0f32, 4.0] {
+        a.set_attr(id, attrs::POS_X, x).unwrap();
+        steps(&[&a, &b], &clock, 3);
+    }
+    assert!(!b.status().change_tracking, "found gone, nobody listens");
+
+    let log = Arc::clone(&seen);
+    b.on_change(move |signal| log.lock().unwrap().push(signal.clone()));
+    a.set_attr(id, attrs::POS_X, 5.0f32).unwrap();
+    steps(&[&a, &b], &clock, 3);
+    assert_eq!(pos_x_updates(&seen).len(), 2, "a new callback hears the next change");
+    assert!(!a.status().change_tracking, "the writer never listened");
+}

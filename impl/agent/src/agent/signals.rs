@@ -1,5 +1,6 @@
 //! Change signals: every visible change goes, after the state lock is released, to each subscription's bounded
-//! channel ([`Agent::subscribe`]) and to each change callback ([`Agent::on_change`]).
+//! channel ([`Agent::subscribe`]) and to each change callback ([`Agent::on_change`]). While there is neither, the
+//! replica does not look for changes at all (a write-only agent, a camera driver, pays nothing for them).
 //!
 //! A subscription costs its reader a thread hand-off per change (the receiving thread wakes the reader's); a
 //! callback runs on the thread that made the change visible — the transport's receiving thread for a remote
@@ -87,6 +88,7 @@ impl<T: Transport + 'static> Agent<T> {
     pub fn subscribe(&self, capacity: usize) -> Receiver<ChangeSignal> {
         let (sender, receiver) = bounded(capacity.max(1));
         self.inner.signals.subscribers.lock().unwrap_or_else(|p| p.into_inner()).push(sender);
+        self.inner.track_changes_if_listened();
         receiver
     }
 
@@ -113,14 +115,19 @@ impl<T: Transport + 'static> Agent<T> {
     pub fn on_change(&self, callback: impl Fn(&ChangeSignal) + Send + Sync + 'static) -> CallbackId {
         let id = CallbackId(self.inner.signals.next_callback.fetch_add(1, Ordering::Relaxed));
         self.inner.signals.callbacks.lock().unwrap_or_else(|p| p.into_inner()).push((id, Arc::new(callback)));
+        self.inner.track_changes_if_listened();
         id
     }
 
     /// Stops calling the callback `id`; says whether it was registered. A call already under way finishes.
     pub fn remove_on_change(&self, id: CallbackId) -> bool {
-        let mut callbacks = self.inner.signals.callbacks.lock().unwrap_or_else(|p| p.into_inner());
-        let before = callbacks.len();
-        callbacks.retain(|(registered, _)| *registered != id);
-        callbacks.len() != before
+        let removed = {
+            let mut callbacks = self.inner.signals.callbacks.lock().unwrap_or_else(|p| p.into_inner());
+            let before = callbacks.len();
+            callbacks.retain(|(registered, _)| *registered != id);
+            callbacks.len() != before
+        };
+        self.inner.track_changes_if_listened();
+        removed
     }
 }

@@ -43,7 +43,7 @@ impl AgentCore {
         };
         let mut replica = Replica::new(self.config.id.replica(incarnation));
         replica.set_log_limits(self.config.log_limits);
-        replica.set_change_tracking(true);
+        replica.set_change_tracking(self.change_tracking);
         let alone = snapshot.is_none();
         let graph = *self.graph.get_or_insert_with(|| GraphId::from_nonce(self.life.nonce));
         let mut seed_nodes = None;
