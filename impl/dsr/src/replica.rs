@@ -203,4 +203,6 @@ impl Replica {
 }
 
 #[cfg(test)]
+mod changes_tests;
+#[cfg(test)]
 mod install_tests;

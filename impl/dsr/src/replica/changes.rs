@@ -6,7 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use super::Replica;
 use crate::delta::Delta;
 use crate::ids::{Dot, EdgeKey, Element, Name, NodeId, ReplicaId};
-use crate::mutants::DsrMutant;
+use crate::mutants::{DsrMutant, Plant};
 use crate::store::Attrs;
 
 /// A change to the visible graph, reported when change tracking is on ([`Replica::set_change_tracking`]).
@@ -81,8 +81,36 @@ pub(super) struct Visibility {
 
 impl Replica {
     /// The elements a delta may change: its own entries, tombstoned nodes and their incident edges, and the
-    /// attributes of all of them.
+    /// attributes of all of them; for an attribute write, only its own attributes ([`Replica::touched_by_attrs`]).
     pub(super) fn touched_by(&self, delta: &Delta) -> Touched {
+        self.touched_by_attrs(delta).unwrap_or_else(|| self.touched_by_any(delta))
+    }
+
+    /// What an attribute write touches, or `None` for any other delta. A delta of node attributes alone (no core,
+    /// edge or tombstone; not a snapshot) whose context takes no value of those nodes' cores away changes no
+    /// node's or edge's visibility or name: only its own attributes may change, and the look before and after is
+    /// theirs and their nodes', without the names and incident edges [`Replica::touched_by_any`] walks. Its
+    /// events are the general look's (a property test in `replica/changes_tests.rs` checks it).
+    pub(super) fn touched_by_attrs(&self, delta: &Delta) -> Option<Touched> {
+        let store = &delta.store;
+        if delta.complete || self.plant != Plant::NONE || !store.tombstones.is_empty() || !store.edges.is_empty() {
+            return None;
+        }
+        let mut touched = Touched::default();
+        for (id, theirs) in &store.nodes {
+            let keeps_core =
+                self.store.nodes.get(id).is_none_or(|mine| mine.core.dots().all(|dot| !delta.ctx.contains(dot)));
+            if !theirs.core.is_empty() || !keeps_core {
+                return None;
+            }
+            touched.nodes.insert(*id);
+            touched.attrs.extend(theirs.attrs.keys().map(|name| (Element::Node(*id), name.clone())));
+        }
+        Some(touched)
+    }
+
+    /// What any delta may change ([`Replica::touched_by`]).
+    pub(super) fn touched_by_any(&self, delta: &Delta) -> Touched {
         let mut touched = Touched::default();
         touched.nodes.extend(delta.store.nodes.keys().copied());
         touched.nodes.extend(delta.store.tombstones.iter().copied());

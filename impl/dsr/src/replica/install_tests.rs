@@ -18,7 +18,7 @@ use crate::value::Value;
 
 /// One operation or delivery of a random history. Indices are reduced modulo what exists when it runs.
 #[derive(Clone, Debug)]
-enum Step {
+pub(super) enum Step {
     InsertNode { replica: usize, name: usize },
     DeleteNode { replica: usize, pick: usize },
     InsertEdge { replica: usize, from: usize, to: usize },
@@ -28,7 +28,7 @@ enum Step {
     Deliver { pick: usize },
 }
 
-fn step() -> impl Strategy<Value = Step> {
+pub(super) fn step() -> impl Strategy<Value = Step> {
     let r = 0..3usize;
     prop_oneof![
         3 => (r.clone(), 0..5usize).prop_map(|(replica, name)| Step::InsertNode { replica, name }),
@@ -69,6 +69,11 @@ fn perturb() -> impl Strategy<Value = Perturb> {
 }
 
 fn run(steps: &[Step]) -> Vec<Replica> {
+    run_with(steps, |_, _| {})
+}
+
+/// Runs a random history; `delivering` sees each delivery's receiver and delta just before the join.
+pub(super) fn run_with(steps: &[Step], mut delivering: impl FnMut(&Replica, &Delta)) -> Vec<Replica> {
     let mut replicas: Vec<Replica> = (1..=3).map(|id| Replica::new(ReplicaId(id))).collect();
     let mut in_flight: Vec<(usize, Arc<Delta>)> = Vec::new();
     for (now, step) in (1u64..).zip(steps) {
@@ -118,6 +123,7 @@ fn run(steps: &[Step]) -> Vec<Replica> {
             Step::Deliver { pick } => {
                 if !in_flight.is_empty() {
                     let (to, delta) = in_flight.swap_remove(pick % in_flight.len());
+                    delivering(&replicas[to], &delta);
                     replicas[to].apply(&delta).expect("our own deltas apply");
                 }
                 None
