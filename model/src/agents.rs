@@ -459,8 +459,7 @@ impl AgentsModel {
             Ok(((), vec![delta]))
         });
         let Ok(((), written)) = result else { return };
-        let out =
-            Output { sends: written.sends(), changes: written.changes, events: Vec::new(), retired: written.retired };
+        let out = Output { sends: written.sends(), changes: written.changes, events: Vec::new() };
         let (origin, stamp, recorded) = kind.into_inner().expect("the write ran");
         state.history.push(Arc::new(OpRecord {
             id: Dot::new(origin.replica, origin.first),

@@ -833,8 +833,6 @@ impl<T: Transport> Inner<T> {
         if earlier {
             self.timer.ring();
         }
-        // Freed last: what the history let go of is off the path of the change to the application.
-        drop(out.retired);
     }
 
     /// Periodic work: graph requests while joining, starting alone after the wait, announces.

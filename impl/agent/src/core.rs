@@ -473,12 +473,11 @@ impl AgentCore {
         let replica = self.replica.as_mut().ok_or(WriteRefusal::NotJoined)?;
         let (result, deltas) = op(replica, now_ns).map_err(WriteRefusal::Op)?;
         let changes = replica.drain_changes();
-        let retired = replica.take_retired();
         if !deltas.is_empty() {
             self.unannounced_write_ns = Some(now_ns);
         }
         let graph = self.graph.unwrap_or_else(|| GraphId::from_nonce(self.life.nonce));
-        Ok((result, Written { from: self.config.id, graph, deltas, changes, retired }))
+        Ok((result, Written { from: self.config.id, graph, deltas, changes }))
     }
 
     /// Joins remote deltas into the replica, or buffers them while joining, tagged with their graph and sender
@@ -515,7 +514,6 @@ impl AgentCore {
             if let Err(error) = replica.apply_shared(delta) {
                 out.events.push(Event::Rejected { what, error: error.to_string() });
             }
-            out.retired.extend(replica.take_retired());
         }
         out.changes.extend(replica.drain_changes());
     }

@@ -44,8 +44,6 @@ impl<T: Transport + 'static> Agent<T> {
             self.inner.timer.ring();
             self.inner.transport.interrupt();
         }
-        // Freed last: what the history let go of is off the write's path.
-        drop(written.retired);
         Ok(result)
     }
 

@@ -145,9 +145,6 @@ pub struct Output {
     pub changes: Vec<ChangeEvent>,
     /// Events.
     pub events: Vec<Event>,
-    /// Deltas the history let go of ([`dsr::Replica::take_retired`]): drop them once the latency-critical work is
-    /// done.
-    pub retired: Vec<Arc<Delta>>,
 }
 
 impl Output {
@@ -180,8 +177,6 @@ pub struct Written {
     pub deltas: Vec<Arc<Delta>>,
     /// The replica's change events.
     pub changes: Vec<ChangeEvent>,
-    /// Deltas the history let go of: drop them after publishing ([`Output::retired`]).
-    pub retired: Vec<Arc<Delta>>,
 }
 
 impl Written {

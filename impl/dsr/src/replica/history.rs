@@ -43,22 +43,6 @@ pub(super) struct DeltaLog {
     pub(super) deltas: VecDeque<(Arc<Delta>, usize)>,
     pub(super) payload_bytes: usize,
     pub(super) limits: LogLimits,
-    pub(super) retired: Retired,
-}
-
-/// Deltas the last push evicted from the history and that are not freed yet ([`Replica::take_retired`]). No part
-/// of the replica's state: equal and hashed alike whatever they hold.
-#[derive(Clone, Debug, Default)]
-pub(super) struct Retired(pub(super) Vec<Arc<Delta>>);
-
-impl PartialEq for Retired {
-    fn eq(&self, _: &Self) -> bool {
-        true
-    }
-}
-impl Eq for Retired {}
-impl std::hash::Hash for Retired {
-    fn hash<H: std::hash::Hasher>(&self, _: &mut H) {}
 }
 
 impl DeltaLog {
@@ -66,30 +50,19 @@ impl DeltaLog {
         if self.limits.max_deltas == 0 {
             return;
         }
-        // What an earlier push evicted and nobody took is freed here, as if it had never been kept.
-        self.retired.0.clear();
         let size = delta.payload_bytes();
         self.payload_bytes += size;
         self.deltas.push_back((delta, size));
         while self.deltas.len() > self.limits.max_deltas
             || (self.payload_bytes > self.limits.max_payload_bytes && self.deltas.len() > 1)
         {
-            let (evicted, evicted_bytes) = self.deltas.pop_front().expect("non-empty log");
-            self.payload_bytes -= evicted_bytes;
-            self.retired.0.push(evicted);
+            let (_, evicted) = self.deltas.pop_front().expect("non-empty log");
+            self.payload_bytes -= evicted;
         }
     }
 }
 
 impl Replica {
-    /// Takes the deltas the last operation or join evicted from the history, to be freed where it costs least:
-    /// after a write is published, after a received change is signalled (an evicted camera frame is a buffer to
-    /// free, or a shared-memory lease to give back). Not taken, they are freed by the next push into the history:
-    /// the replica holds at most one push's evictions beyond its [`LogLimits`].
-    pub fn take_retired(&mut self) -> Vec<Arc<Delta>> {
-        std::mem::take(&mut self.log.retired.0)
-    }
-
     /// The whole state as a delta: joining it gives a replica everything this one has.
     pub fn snapshot(&self) -> Delta {
         Delta {
@@ -160,54 +133,5 @@ impl Replica {
     /// Number of deltas retained for anti-entropy.
     pub fn log_len(&self) -> usize {
         self.log.deltas.len()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use std::sync::Arc;
-
-    use crate::{LogLimits, NewNode, Replica, ReplicaId, attrs};
-
-    #[test]
-    fn evicted_deltas_wait_to_be_taken_and_the_next_push_frees_those_not_taken() {
-        let mut replica = Replica::new(ReplicaId(1));
-        replica.set_log_limits(LogLimits { max_deltas: 2, max_payload_bytes: 1 << 20 });
-        let (id, first) = replica.insert_node(1, NewNode::new("object", "cup")).unwrap();
-        let second = replica.set_attr(2, id, attrs::POS_X, 1.0f32).unwrap();
-        assert!(replica.take_retired().is_empty(), "nothing evicted within the limit");
-
-        let third = replica.set_attr(3, id, attrs::POS_X, 2.0f32).unwrap();
-        let retired = replica.take_retired();
-        assert_eq!(retired.len(), 1);
-        assert!(Arc::ptr_eq(&retired[0], &first), "the oldest goes");
-        assert_eq!(replica.log_len(), 2, "the history is within its limit at once");
-        drop(retired);
-        assert_eq!(Arc::strong_count(&first), 1, "taken and dropped, only the caller holds it");
-
-        replica.set_attr(4, id, attrs::POS_X, 3.0f32).unwrap();
-        assert_eq!(Arc::strong_count(&second), 2, "evicted, held until taken");
-        replica.set_attr(5, id, attrs::POS_X, 4.0f32).unwrap();
-        assert_eq!(Arc::strong_count(&second), 1, "not taken: the next push freed it");
-        assert_eq!(Arc::strong_count(&third), 2, "the last push's eviction is held");
-        assert_eq!(replica.take_retired().len(), 1);
-    }
-
-    #[test]
-    fn held_evictions_are_no_part_of_the_state() {
-        let mut a = Replica::new(ReplicaId(1));
-        a.set_log_limits(LogLimits { max_deltas: 1, max_payload_bytes: 1 << 20 });
-        let (id, _) = a.insert_node(1, NewNode::new("object", "cup")).unwrap();
-        a.set_attr(2, id, attrs::POS_X, 1.0f32).unwrap();
-        let mut b = a.clone();
-        assert!(!b.take_retired().is_empty());
-        assert_eq!(a, b, "equal whether or not the evictions were taken");
-        let hash = |r: &Replica| {
-            use std::hash::{Hash, Hasher};
-            let mut hasher = std::collections::hash_map::DefaultHasher::new();
-            r.hash(&mut hasher);
-            hasher.finish()
-        };
-        assert_eq!(hash(&a), hash(&b));
     }
 }
