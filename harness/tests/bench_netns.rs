@@ -167,7 +167,7 @@ fn bench_payload_reports_every_cell_and_no_loopback_bytes_through_shared_memory(
         "--rate-hz",
         "50",
         "--paths",
-        "rtps,shm,iceoryx2",
+        "rtps,shm,transport,iceoryx2",
         "--netns",
         "require",
         "--json",
@@ -182,7 +182,7 @@ fn bench_payload_reports_every_cell_and_no_loopback_bytes_through_shared_memory(
     assert_eq!(report["netns"], Value::Bool(true), "{report}");
     let cells = report["cells"].as_array().expect("cells");
     let paths: Vec<&str> = cells.iter().map(|c| c["path"].as_str().expect("path")).collect();
-    assert_eq!(paths, ["rtps", "shm", "iceoryx2"], "one cell per path, in the order asked: {report}");
+    assert_eq!(paths, ["rtps", "shm", "transport", "iceoryx2"], "one cell per path, in the order asked: {report}");
     for cell in cells {
         assert_eq!((number(cell, &["size_bytes"]), number(cell, &["receivers"])), (4096.0, 1.0), "{cell}");
         assert_eq!(number(cell, &["expected"]), 5.0, "{cell}");
@@ -190,17 +190,18 @@ fn bench_payload_reports_every_cell_and_no_loopback_bytes_through_shared_memory(
         assert!((1.0..=5.0).contains(&delivered), "{cell}");
         assert!(number(cell, &["latency", "p50_ns"]) <= number(cell, &["latency", "max_ns"]), "{cell}");
         assert!(number(cell, &["cpu_ns_per_sample"]) >= 0.0, "{cell}");
-        let agents = cell["path"] != "iceoryx2";
-        assert_eq!(cell["to_iceoryx2"].is_object(), agents, "agent cells carry ratios to raw iceoryx2: {cell}");
+        let above = cell["path"] != "iceoryx2";
+        assert_eq!(cell["to_iceoryx2"].is_object(), above, "cells above raw iceoryx2 carry ratios to it: {cell}");
     }
     // At least one copy of every RTPS sample crossed the loopback; not one byte through shared memory.
     assert!(number(&cells[0], &["loopback_bytes_per_sample"]) >= 4096.0, "{report}");
     assert_eq!(number(&cells[1], &["loopback_bytes_per_sample"]), 0.0, "{report}");
     assert_eq!(number(&cells[2], &["loopback_bytes_per_sample"]), 0.0, "{report}");
+    assert_eq!(number(&cells[3], &["loopback_bytes_per_sample"]), 0.0, "{report}");
     // The table: a heading, a header and a row per cell, with every column.
     let lines: Vec<&str> = stdout.lines().collect();
     assert!(lines[0].starts_with("payload paths:") && lines[1].contains("loopback B/sample"), "{stdout}");
-    for (line, label) in lines[2..5].iter().zip(["agents, rtps", "agents, shm", "raw iceoryx2"]) {
+    for (line, label) in lines[2..6].iter().zip(["agents, rtps", "agents, shm", "shm transport", "raw iceoryx2"]) {
         assert!(line.contains(label) && line.contains("/5"), "{stdout}");
         // 13 columns; the path's label is two words.
         assert_eq!(line.split_whitespace().count(), 14, "{line}");

@@ -82,7 +82,7 @@ pub struct PayloadReceiverArgs {
     /// DDS domain id.
     #[arg(long)]
     pub domain: u16,
-    /// Topic prefix (agents) or service prefix (iceoryx2).
+    /// Topic prefix (agents) or service prefix (iceoryx2, the shared-memory transport).
     #[arg(long)]
     pub prefix: String,
     /// This receiver's index.

@@ -5,6 +5,9 @@
 //! - **agents over a link** (`agents.rs`): an agent in this process writes the attribute `cam_rgb` of a node; one
 //!   agent per receiver process (`bench payload-receiver`, [`receiver`]) over the same [`agent::Link`] stamps the
 //!   change signal of each value in its replica;
+//! - **the shared-memory transport alone** (`lanes.rs`): the agents' `transport::shm::ShmTransport` from this
+//!   process to one per receiver process, no agent on either side: between the two, it says whether the agents'
+//!   distance to raw iceoryx2 is in their transport or in the agent;
 //! - **raw iceoryx2** (`raw.rs`): `transport::shm::limit` — a sample into a loaned chunk, each receiver process
 //!   stamps it in place, no agent, no envelope, no copy out;
 //! - **memcpy**: one copy of the size in this process.
@@ -21,6 +24,8 @@
 //! issue's targets beside it.
 
 mod agents;
+mod lanes;
+mod numbering;
 mod raw;
 pub mod table;
 
@@ -82,6 +87,7 @@ pub fn run(
             let before = counting.counters()?;
             let session = match path {
                 PayloadPath::Iceoryx2 => raw::session(experiment, receivers, counting, program, progress),
+                PayloadPath::Transport => lanes::session(experiment, receivers, counting, program, progress),
                 PayloadPath::Agents(link) => {
                     agents::session(experiment, link, receivers, domain, counting, program, progress)
                 }
@@ -111,6 +117,7 @@ pub fn receiver(path: PayloadPath, domain: u16, prefix: &str, index: u32) -> any
             raw::receive(prefix, index)?;
             Ok(None)
         }
+        PayloadPath::Transport => Ok(Some(lanes::receive(prefix, index)?)),
         PayloadPath::Agents(link) => Ok(Some(agents::receive(link, domain, prefix, index)?)),
     }
 }

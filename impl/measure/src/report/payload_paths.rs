@@ -1,5 +1,5 @@
 //! "Same-host payloads against the machine's limit": payloads from one writer to N receiver processes by every path
-//! (agents over each link, raw iceoryx2, memcpy) in one run, from [`crate::results::PayloadPathsResult`]; the same
+//! (agents over each link, their shared-memory transport alone, raw iceoryx2, memcpy) in one run, from [`crate::results::PayloadPathsResult`]; the same
 //! table and targets `cortex bench payload` prints ([`crate::bench::payload::table`]). Says "not run" when the set
 //! has no `payload_paths` section.
 
@@ -8,6 +8,7 @@ use std::fmt::Write as _;
 use super::{Context, Section};
 use crate::bench::payload::table;
 use crate::results::Results;
+use crate::spec::PayloadPath;
 
 /// The section.
 pub(super) const SECTION: Section =
@@ -25,9 +26,10 @@ fn write(md: &mut String, r: &Results, _: &Context<'_>) {
          same; `measure::bench::payload`). Agents: an `agent::Agent` in the report's process writes `cam_rgb` of a \
          node, and each receiver process runs its own agent over the same link (`cortex agent --transport`). Raw \
          iceoryx2 (`transport::shm::limit`): the sample copied once into a loaned chunk and read in place by each \
-         receiver, no agent — the same-host limit; memcpy: one copy of the size in this process. Every size goes \
+         receiver, no agent — the same-host limit; memcpy: one copy of the size in this process.{} Every size goes \
          through the same receivers in turn, after probes and {}.\n",
         paths.join(", "),
+        transport_text(&result.experiment),
         warmup_text(&result.experiment)
     );
     let _ = writeln!(md, "{}.\n", table::heading(result));
@@ -44,6 +46,17 @@ fn write(md: &mut String, r: &Results, _: &Context<'_>) {
         }
     }
     md.push('\n');
+}
+
+/// What the shared-memory transport path is, when the run has it.
+fn transport_text(experiment: &crate::spec::PayloadPathsExperiment) -> &'static str {
+    if experiment.paths.contains(&PayloadPath::Transport) {
+        " The shared-memory transport (`transport::shm::ShmTransport`): the agents' transport between processes with \
+         no agent on either side, so that between raw iceoryx2 and the agents over `shm` it shows which layer a \
+         difference is in."
+    } else {
+        ""
+    }
 }
 
 /// The warm-up of each size, in words.

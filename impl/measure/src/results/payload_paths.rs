@@ -7,9 +7,9 @@ use crate::spec::{PayloadPath, PayloadPathsExperiment};
 
 /// How the latencies of [`PayloadCell`] are taken, as tables state it.
 pub const PAYLOAD_PATHS_LATENCY: &str = "one way: from the writer's stamp just before it writes (an agent's \
-    set_attr, iceoryx2's loan) to each receiver's stamp when the value is in its replica (agents: a change \
-    callback, on the thread that joined it) or the sample is in its hands (iceoryx2), both on this host's wall \
-    clock; memcpy: the copy alone";
+    set_attr, the transport's publish, iceoryx2's loan) to each receiver's stamp when the value is in its replica \
+    (agents: a change callback, on the thread that joined it) or the sample is in its hands (the transport, \
+    iceoryx2), both on this host's wall clock; memcpy: the copy alone";
 
 /// Every cell of one run: the experiment, where it ran, and a cell per size, receivers and path.
 #[derive(Clone, Debug, Serialize)]
@@ -85,13 +85,13 @@ impl PathRatios {
 }
 
 impl PayloadPathsResult {
-    /// The result of `cells`: put in table order, each agent cell given its ratios to raw iceoryx2's of the same
+    /// The result of `cells`: put in table order, each agent and transport cell given its ratios to raw iceoryx2's of the same
     /// size and receivers.
     pub fn new(experiment: PayloadPathsExperiment, netns: bool, loadavg: String, mut cells: Vec<PayloadCell>) -> Self {
         let order = |path: PayloadPath| experiment.paths.iter().position(|&p| p == path).unwrap_or(usize::MAX);
         cells.sort_by_key(|c| (c.size_bytes, c.receivers, order(c.path)));
         let limits: Vec<PayloadCell> = cells.iter().filter(|c| c.path == PayloadPath::Iceoryx2).cloned().collect();
-        for cell in cells.iter_mut().filter(|c| matches!(c.path, PayloadPath::Agents(_))) {
+        for cell in cells.iter_mut().filter(|c| matches!(c.path, PayloadPath::Agents(_) | PayloadPath::Transport)) {
             let limit = limits.iter().find(|l| l.size_bytes == cell.size_bytes && l.receivers == cell.receivers);
             cell.to_iceoryx2 = limit.and_then(|limit| PathRatios::of(cell, limit));
         }

@@ -13,23 +13,32 @@ pub enum PayloadPath {
     /// A raw iceoryx2 publish-subscribe to receiver processes (`transport::shm::limit`): no agent, no envelope, no
     /// copy out of shared memory; the limit agents over shared memory are held to.
     Iceoryx2,
+    /// The agents' same-host transport alone (`transport::shm::ShmTransport`) to receiver processes: its four
+    /// lanes, its wake-ups and the copy out of shared memory (or the lease) of what it receives, without the agent
+    /// (no write under a lock, no envelope or delta encoded and decoded, no join, no change signal). Between raw
+    /// iceoryx2 and the agents over `shm`, it says which of the two layers above iceoryx2 the difference is in.
+    Transport,
     /// An agent in the measuring process writes an attribute; one agent per receiver process gets it, over this
     /// link (`cortex agent --transport`).
     Agents(Link),
 }
 
 impl PayloadPath {
-    /// Every path: the two limits, then agents over every [`Link`] (a new link is a new path, with nothing to add
+    /// Every path: the two limits, the agents' shared-memory transport alone, then agents over every [`Link`] (a new link is a new path, with nothing to add
     /// here).
     pub fn all() -> Vec<PayloadPath> {
-        [PayloadPath::Memcpy, PayloadPath::Iceoryx2].into_iter().chain(Link::ALL.map(PayloadPath::Agents)).collect()
+        [PayloadPath::Memcpy, PayloadPath::Iceoryx2, PayloadPath::Transport]
+            .into_iter()
+            .chain(Link::ALL.map(PayloadPath::Agents))
+            .collect()
     }
 
-    /// Its name on command lines and in experiment files: `memcpy`, `iceoryx2`, or the link's name (`rtps`, `shm`).
+    /// Its name on command lines and in experiment files: `memcpy`, `iceoryx2`, `transport`, or the link's name (`rtps`, `shm`).
     pub fn name(self) -> &'static str {
         match self {
             PayloadPath::Memcpy => "memcpy",
             PayloadPath::Iceoryx2 => "iceoryx2",
+            PayloadPath::Transport => "transport",
             PayloadPath::Agents(link) => link.name(),
         }
     }
@@ -39,6 +48,7 @@ impl PayloadPath {
         match self {
             PayloadPath::Memcpy => "memcpy".into(),
             PayloadPath::Iceoryx2 => "raw iceoryx2".into(),
+            PayloadPath::Transport => "shm transport".into(),
             PayloadPath::Agents(link) => format!("agents, {link}"),
         }
     }
@@ -49,6 +59,9 @@ impl PayloadPath {
             PayloadPath::Memcpy => "a memcpy of the size in this process (the machine's limit for one copy)".into(),
             PayloadPath::Iceoryx2 => {
                 "raw iceoryx2 publish-subscribe to receiver processes (the same-host limit)".into()
+            }
+            PayloadPath::Transport => {
+                "the agents' shared-memory transport alone to receiver processes (no agent, no delta)".into()
             }
             PayloadPath::Agents(link) => format!("agents over --transport {link}: {}", link.summary()),
         }
@@ -139,7 +152,7 @@ fn default_warmup() -> u32 {
 
 impl Default for PayloadPathsExperiment {
     /// `cortex bench payload`'s defaults: 16 B to 4 MiB (the 360,960 B camera frame among them) to 1, 2 and 8
-    /// receivers by every path, 40 samples each at 20 Hz (about two minutes on 2 cores).
+    /// receivers by every path, 40 samples each at 20 Hz (about three minutes on 2 cores).
     fn default() -> Self {
         PayloadPathsExperiment {
             sizes: vec![16, 1024, 65_536, 360_960, 1 << 20, 4 << 20],
@@ -243,7 +256,7 @@ mod tests {
     fn the_defaults_are_valid_and_numbers_that_make_no_cell_are_refused() {
         let good = PayloadPathsExperiment::default();
         good.validate().unwrap();
-        assert_eq!(good.cells(), 6 * (4 * 3 + 1));
+        assert_eq!(good.cells(), 6 * (5 * 3 + 1));
         let broken = [
             PayloadPathsExperiment { sizes: vec![], ..good.clone() },
             PayloadPathsExperiment { warmup: MAX_PAYLOAD_PATH_COUNT + 1, ..good.clone() },

@@ -72,7 +72,9 @@ pub fn notes(result: &PayloadPathsResult) -> Vec<String> {
         "delivered: deliveries measured / samples x receivers; CPU us/sample: a receiver process's CPU time (all its \
          threads) over the window, per sample, mean over the receivers"
             .to_owned(),
-        "/iox: the agent figure over raw iceoryx2's for the same size and receivers (1.00 = the limit)".to_owned(),
+        "/iox: the agents' (or the transport's) figure over raw iceoryx2's for the same size and receivers \
+         (1.00 = the limit)"
+            .to_owned(),
     ];
     let experiment = &result.experiment;
     let fewest_receivers = experiment.receivers.iter().copied().min().unwrap_or(1);
