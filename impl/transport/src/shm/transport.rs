@@ -1,11 +1,13 @@
 //! [`ShmTransport`]: a [`Transport`] whose endpoints are all on one host, every channel an [`ShmLane`], and
 //! receivers woken by an iceoryx2 event service rather than polling (the spike showed polling costs milliseconds
-//! with 8 receivers on 2 cores). It has no discovery and no other-host path: it is the same-host half of the
+//! with 8 receivers on 2 cores). A publish's wake-up names its lane (event id [`lane_event`]), and a woken receiver
+//! looks at the lanes it was told of before the others; before it waits it looks at every lane, so a wake-up that
+//! was lost or merged delays nothing beyond the next look. It has no discovery and no other-host path: it is the same-host half of the
 //! hybrid transport the design describes (`ARCHITECTURE.md`, "Same-host shared memory"), usable alone by agents
 //! that are known to share a host.
 
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU8, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use bytes::Bytes;
@@ -26,6 +28,9 @@ pub struct ShmTransport {
     listener_id: iceoryx2::identifiers::UniqueListenerId,
     /// The lane `try_recv` looks at first, so no channel starves the others.
     next_lane: AtomicUsize,
+    /// Lanes a wake-up named that have not been found empty since (bit [`Channel::index`]): where a woken
+    /// receiver looks first. A hint only: every look that finds nothing there looks at every lane.
+    notified: AtomicU8,
     counters: Counters,
     max_sample_bytes: usize,
     _node: Node<ipc_threadsafe::Service>,
@@ -84,6 +89,7 @@ impl ShmTransport {
             listener_id: listener.id(),
             listener: Mutex::new(listener),
             next_lane: AtomicUsize::new(0),
+            notified: AtomicU8::new(0),
             counters: Counters::default(),
             max_sample_bytes: settings.max_sample_bytes,
             _node: node,
@@ -91,24 +97,55 @@ impl ShmTransport {
     }
 }
 
-/// The event id of [`Transport::interrupt`]'s notification (a publish's wake-up has the default, 0).
+/// The event id of [`Transport::interrupt`]'s notification.
 const INTERRUPT: EventId = EventId::new(1);
 
+/// The event id of a publish's wake-up on `channel`: 2 and up, by [`Channel::index`].
+fn lane_event(channel: Channel) -> EventId {
+    EventId::new(2 + channel.index())
+}
+
+/// The lane bit of a wake-up's event id (0 for an id that names no lane).
+fn lane_bit(event: EventId) -> u8 {
+    match event.as_value().checked_sub(2) {
+        Some(index) if index < Channel::COUNT => 1 << index,
+        _ => 0,
+    }
+}
+
 impl ShmTransport {
-    /// Wakes every endpoint's listener but this one's: a publish that also woke its own process's receiving
-    /// thread cost a thread switch per sample, which on two cores competed with the receivers (`cortex bench rtt
-    /// --shm`: about 25 µs of round trip).
-    fn wake_others(&self) -> Result<(), iceoryx2::port::notifier::NotifierNotifyError> {
+    /// Wakes every endpoint's listener but this one's, naming `channel`'s lane: a publish that also woke its own
+    /// process's receiving thread cost a thread switch per sample, which on two cores competed with the receivers
+    /// (`cortex bench rtt --shm`: about 25 µs of round trip).
+    fn wake_others(&self, channel: Channel) -> Result<(), iceoryx2::port::notifier::NotifierNotifyError> {
         let mut failed = Ok(());
+        let event = lane_event(channel);
         self.notifier.for_each_listener(|listener, details| {
             if details.listener_id != self.listener_id
-                && let Err(error) = listener.notify()
+                && let Err(error) = listener.notify_with_custom_event_id(event)
             {
                 failed = Err(error);
             }
             CallbackProgression::Continue
         });
         failed
+    }
+}
+
+impl ShmTransport {
+    /// The next sample on `channel`'s lane, counted.
+    fn take(&self, channel: Channel) -> Option<Sample> {
+        match self.lanes[channel.index()].try_recv() {
+            Ok(Some(sample)) => {
+                self.counters.received(sample.bytes.len());
+                Some(Sample { channel, origin: sample.origin, bytes: sample.bytes })
+            }
+            Ok(None) => None,
+            Err(error) => {
+                tracing::warn!(%error, "shared-memory receive failed");
+                None
+            }
+        }
     }
 }
 
@@ -132,21 +169,20 @@ impl Transport for ShmTransport {
             }
         }
         self.counters.sent(size, size);
-        self.wake_others().map_err(|e| write(format!("wake-up notify: {e:?}")))
+        self.wake_others(channel).map_err(|e| write(format!("wake-up notify: {e:?}")))
     }
 
     fn try_recv(&self) -> Option<Sample> {
         let first = self.next_lane.fetch_add(1, Ordering::Relaxed);
-        for k in 0..self.lanes.len() {
-            let channel = Channel::ALL[(first + k) % self.lanes.len()];
-            match self.lanes[channel.index()].try_recv() {
-                Ok(Some(sample)) => {
-                    self.counters.received(sample.bytes.len());
-                    return Some(Sample { channel, origin: sample.origin, bytes: sample.bytes });
-                }
-                Ok(None) => {}
-                Err(error) => tracing::warn!(%error, "shared-memory receive failed"),
+        let notified = self.notified.load(Ordering::Relaxed);
+        let order = (0..Channel::COUNT).map(|k| Channel::ALL[(first + k) % Channel::COUNT]);
+        // The lanes a wake-up named, then every lane (those again included: they may have been named since).
+        let notified_first = order.clone().filter(|channel| notified & 1 << channel.index() != 0);
+        for channel in notified_first.chain(order) {
+            if let Some(sample) = self.take(channel) {
+                return Some(sample);
             }
+            self.notified.fetch_and(!(1 << channel.index()), Ordering::Relaxed);
         }
         None
     }
@@ -163,8 +199,16 @@ impl Transport for ShmTransport {
             }
             // A notification sent after the look above is kept by the listener, so the wait returns at once.
             let listener = self.listener.lock().unwrap_or_else(|p| p.into_inner());
-            let mut interrupted = false;
-            match listener.timed_wait(|event| interrupted |= event.id == INTERRUPT, left) {
+            let (mut interrupted, mut lanes) = (false, 0u8);
+            let wait = listener.timed_wait(
+                |event| {
+                    interrupted |= event.id == INTERRUPT;
+                    lanes |= lane_bit(event.id);
+                },
+                left,
+            );
+            self.notified.fetch_or(lanes, Ordering::Relaxed);
+            match wait {
                 // A signal ended the wait (SIGCONT after a pause, every time): look again.
                 Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
                 Err(error) => {
@@ -244,6 +288,26 @@ mod tests {
         };
         assert!(woken(&b) && woken(&c), "every other endpoint is woken");
         assert!(!woken(&a), "the publisher's own listener is not");
+    }
+
+    #[test]
+    fn a_wake_up_names_its_lane_and_a_woken_endpoint_looks_there_first() {
+        let [a, b] = endpoints("lane-events", 1 << 10, [40, 41]);
+        a.publish(Channel::Updates, Bytes::from_static(b"update")).expect("publish");
+        a.publish(Channel::Requests, Bytes::from_static(b"request")).expect("publish");
+        let mut events = Vec::new();
+        b.listener.lock().unwrap().try_wait(|event| events.push(event.id)).expect("wait");
+        events.sort_by_key(|id| id.as_value());
+        assert_eq!(events, [lane_event(Channel::Updates), lane_event(Channel::Requests)]);
+        // Told of the requests lane alone, b takes from it first, whichever lane its turn would start at.
+        b.next_lane.store(Channel::Updates.index(), Ordering::Relaxed);
+        b.notified.store(lane_bit(lane_event(Channel::Requests)), Ordering::Relaxed);
+        assert_eq!(b.try_recv().expect("a sample").channel, Channel::Requests);
+        // A lane named but found empty is no longer named, and the look goes on to every lane.
+        assert_eq!(b.try_recv().expect("a sample").channel, Channel::Updates);
+        assert_eq!(b.notified.load(Ordering::Relaxed), 0);
+        assert_eq!(b.try_recv(), None);
+        assert_eq!((lane_bit(INTERRUPT), lane_bit(EventId::new(2 + Channel::COUNT))), (0, 0), "names no lane");
     }
 
     #[test]
