@@ -152,7 +152,7 @@ fn default_warmup() -> u32 {
 
 impl Default for PayloadPathsExperiment {
     /// `cortex bench payload`'s defaults: 16 B to 4 MiB (the 360,960 B camera frame among them) to 1, 2 and 8
-    /// receivers by every path, 40 samples each at 20 Hz (about three minutes on 2 cores).
+    /// receivers by every path, 40 samples each at 20 Hz (three and a half minutes on 2 cores).
     fn default() -> Self {
         PayloadPathsExperiment {
             sizes: vec![16, 1024, 65_536, 360_960, 1 << 20, 4 << 20],
