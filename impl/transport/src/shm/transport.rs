@@ -2,8 +2,8 @@
 //! receivers woken by an iceoryx2 event service rather than polling (the spike showed polling costs milliseconds
 //! with 8 receivers on 2 cores). A publish's wake-up names its lane (event id [`lane_event`]), and a woken receiver
 //! looks at the lanes it was told of before the others; before it waits it looks at every lane, so a wake-up that
-//! was lost or merged delays nothing beyond the next look. It has no discovery and no other-host path: it is the same-host half of the
-//! hybrid transport the design describes (`ARCHITECTURE.md`, "Same-host shared memory"), usable alone by agents
+//! was lost or merged delays nothing beyond the next look. It has no discovery and no other-host path: it is the
+//! same-host half of the hybrid transport the design describes (`ARCHITECTURE.md`, "Same-host shared memory"), usable alone by agents
 //! that are known to share a host.
 
 use std::sync::Mutex;
@@ -130,9 +130,7 @@ impl ShmTransport {
         });
         failed
     }
-}
 
-impl ShmTransport {
     /// The next sample on `channel`'s lane, counted.
     fn take(&self, channel: Channel) -> Option<Sample> {
         match self.lanes[channel.index()].try_recv() {
@@ -176,9 +174,11 @@ impl Transport for ShmTransport {
         let first = self.next_lane.fetch_add(1, Ordering::Relaxed);
         let notified = self.notified.load(Ordering::Relaxed);
         let order = (0..Channel::COUNT).map(|k| Channel::ALL[(first + k) % Channel::COUNT]);
-        // The lanes a wake-up named, then every lane (those again included: they may have been named since).
-        let notified_first = order.clone().filter(|channel| notified & 1 << channel.index() != 0);
-        for channel in notified_first.chain(order) {
+        let named = |channel: &Channel| notified & 1 << channel.index() != 0;
+        // The lanes a wake-up named, then the others. (A sample that comes to a named lane after its look here has
+        // a wake-up of its own, which the listener keeps: the next wait returns at once.)
+        let (first_looks, then) = (order.clone().filter(named), order.filter(|channel| !named(channel)));
+        for channel in first_looks.chain(then) {
             if let Some(sample) = self.take(channel) {
                 return Some(sample);
             }
