@@ -75,11 +75,14 @@ pub fn multicast_name(multicast: Multicast) -> &'static str {
     }
 }
 
+/// The byte every sample of [`payload_of`] (and raw iceoryx2's) is filled with.
+const PAYLOAD_FILL: u8 = 0xA5;
+
 /// A sample of `size` bytes (at least 8) that starts with `seq`, little-endian. Every byte is written before the
 /// sample is handed over (a frame from a driver is in memory already): a zeroed allocation would map its pages only
 /// when the writer's encoder first reads them, after the latency stamp.
 fn payload_of(seq: u64, size: usize) -> Bytes {
-    let mut bytes = vec![0xA5u8; size.max(8)];
+    let mut bytes = vec![PAYLOAD_FILL; size.max(8)];
     bytes[..8].copy_from_slice(&seq.to_le_bytes());
     Bytes::from(bytes)
 }

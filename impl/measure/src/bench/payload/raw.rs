@@ -10,7 +10,7 @@ use transport::SystemClock;
 use transport::shm::limit::{self, LimitSender, Wake};
 
 use super::{Counting, Mark, Window, paced, spawn_receivers};
-use crate::bench::helper;
+use crate::bench::{PAYLOAD_FILL, helper};
 use crate::latency;
 use crate::results::PayloadCell;
 use crate::spec::{PayloadPath, PayloadPathsExperiment};
@@ -39,16 +39,18 @@ pub(super) fn session(
     let mut round = 0u64;
     let mut cells = Vec::new();
     for &size in &experiment.sizes {
-        let mut sample: Vec<u8> = (0..size).map(|i| (i % 251) as u8).collect();
-        let mut send = |sample: &mut Vec<u8>| {
+        // Each sample is made just before it is sent, as the other paths' writers make theirs
+        // ([`crate::bench::payload_of`]): the copy into the loan reads bytes the writer has just written.
+        let mut send = || {
             round += 1;
-            sender.round(round, sample, &SystemClock, ROUND_TIMEOUT)
+            let mut sample = vec![PAYLOAD_FILL; size];
+            sender.round(round, &mut sample, &SystemClock, ROUND_TIMEOUT)
         };
-        paced(experiment.warmup_for(size), experiment.rate_hz, |_| Ok(send(&mut sample).map(drop)?))?;
+        paced(experiment.warmup_for(size), experiment.rate_hz, |_| Ok(send().map(drop)?))?;
         let start = Mark::now(counting, &pids)?;
         let mut latencies = latency::histogram();
         paced(experiment.count, experiment.rate_hz, |_| {
-            let got = send(&mut sample)?;
+            let got = send()?;
             for delivery in &got.deliveries {
                 latencies.saturating_record(delivery.received_ns.saturating_sub(got.sent_ns).max(1));
             }
