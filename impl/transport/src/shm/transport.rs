@@ -182,7 +182,9 @@ impl Transport for ShmTransport {
             if let Some(sample) = self.take(channel) {
                 return Some(sample);
             }
-            self.notified.fetch_and(!(1 << channel.index()), Ordering::Relaxed);
+            if named(&channel) {
+                self.notified.fetch_and(!(1 << channel.index()), Ordering::Relaxed);
+            }
         }
         None
     }

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use agent::rtps::AgentTransport;
 use agent::{Agent, AgentConfig, AgentId, Link};
 use anyhow::{Context as _, bail};
+use bytes::Bytes;
 use dsr::{Change, Element, NewNode, NodeId, attrs};
 use transport::rtps::RtpsConfig;
 use transport::{Clock as _, SystemClock};
@@ -45,13 +46,13 @@ struct Writer {
 }
 
 impl NumberedWriter for Writer {
-    fn write(&mut self, size: usize, flags: u64) -> anyhow::Result<(u64, u64)> {
-        let number = self.next;
+    fn next_number(&mut self) -> u64 {
         self.next += 1;
-        let value = payload_of(number | flags, size);
-        let at = SystemClock.now_ns();
-        self.agent.set_attr(self.source, attrs::CAM_RGB, value)?;
-        Ok((number, at))
+        self.next - 1
+    }
+
+    fn send(&mut self, value: Bytes) -> anyhow::Result<()> {
+        Ok(self.agent.set_attr(self.source, attrs::CAM_RGB, value)?)
     }
 
     fn answered(&self, at_least: u64) -> bool {

@@ -23,7 +23,7 @@ use transport::{Channel, Clock as _, SystemClock, Transport as _};
 
 use super::numbering::{self, Heard, NumberedWriter, Stamps};
 use super::{Counting, ReceiverReport, spawn_receivers};
-use crate::bench::{helper, payload_of, seq_of};
+use crate::bench::{helper, seq_of};
 use crate::results::PayloadCell;
 use crate::spec::{PayloadPath, PayloadPathsExperiment};
 
@@ -79,13 +79,13 @@ impl LaneWriter {
 }
 
 impl NumberedWriter for LaneWriter {
-    fn write(&mut self, size: usize, flags: u64) -> anyhow::Result<(u64, u64)> {
-        let number = self.next;
+    fn next_number(&mut self) -> u64 {
         self.next += 1;
-        let value = payload_of(number | flags, size);
-        let at = SystemClock.now_ns();
-        self.transport.publish(Channel::Updates, value)?;
-        Ok((number, at))
+        self.next - 1
+    }
+
+    fn send(&mut self, value: Bytes) -> anyhow::Result<()> {
+        Ok(self.transport.publish(Channel::Updates, value)?)
     }
 
     fn answered(&self, at_least: u64) -> bool {

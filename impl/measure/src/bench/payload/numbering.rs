@@ -10,9 +10,12 @@
 use std::time::{Duration, Instant};
 
 use anyhow::bail;
+use bytes::Bytes;
+use transport::{Clock as _, SystemClock};
 
 use super::{Counting, Mark, ReceiverReport, Window, collect_reports, paced};
 use crate::bench::helper::Helper;
+use crate::bench::payload_of;
 use crate::latency;
 use crate::results::PayloadCell;
 use crate::spec::{PayloadPath, PayloadPathsExperiment};
@@ -36,9 +39,22 @@ pub(super) const WRITER_SILENT: Duration = Duration::from_secs(60);
 
 /// The writer of a session with receiver processes: what it writes, and what its receivers have answered.
 pub(super) trait NumberedWriter {
+    /// The next sample number (0, 1, 2, ...).
+    fn next_number(&mut self) -> u64;
+
+    /// Writes `value` by the path's own means.
+    fn send(&mut self, value: Bytes) -> anyhow::Result<()>;
+
     /// Writes a sample of `size` bytes numbered with the next number and `flags`; returns the number and when the
-    /// write began (ns on the system clock).
-    fn write(&mut self, size: usize, flags: u64) -> anyhow::Result<(u64, u64)>;
+    /// write began (ns on the system clock): every path stamps at the same point, the sample made, just before it
+    /// is handed to the path.
+    fn write(&mut self, size: usize, flags: u64) -> anyhow::Result<(u64, u64)> {
+        let number = self.next_number();
+        let value = payload_of(number | flags, size);
+        let at = SystemClock.now_ns();
+        self.send(value)?;
+        Ok((number, at))
+    }
 
     /// Whether every receiver has answered a sample numbered `at_least` or later.
     fn answered(&self, at_least: u64) -> bool;
@@ -236,10 +252,14 @@ mod tests {
             sent: Vec<u64>,
         }
         impl NumberedWriter for Slow {
-            fn write(&mut self, _size: usize, flags: u64) -> anyhow::Result<(u64, u64)> {
-                assert_eq!(flags, PROBE | ANSWER);
-                self.sent.push(self.sent.len() as u64);
-                Ok((self.sent.len() as u64 - 1, 0))
+            fn next_number(&mut self) -> u64 {
+                self.sent.len() as u64
+            }
+            fn send(&mut self, value: Bytes) -> anyhow::Result<()> {
+                let flagged = crate::bench::seq_of(&value).expect("a number");
+                assert_eq!(flagged & (PROBE | ANSWER), PROBE | ANSWER);
+                self.sent.push(flagged & NUMBER);
+                Ok(())
             }
             fn answered(&self, at_least: u64) -> bool {
                 self.sent.len() >= 2 && at_least <= 1
