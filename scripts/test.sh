@@ -2,8 +2,10 @@
 # The project's test command (README: "Run the tests"). Everything a test needs is set up here, so a fresh machine
 # needs no hand work.
 #
-# The mutation switch is a cargo feature that a normal build never enables, so the mutant checks build the model
-# and the scheduler once more with `--features mutants`.
+# The mutation switch is a cargo feature that a normal build never enables, so the mutant checks build the crates
+# that carry it once more with it. Every cargo command here selects the whole workspace (`--workspace`, with target
+# filters where only some tests run): the features of shared dependencies are then the same in every build, and
+# no dependency is compiled twice.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # DDS Security's OpenSSL is built from source: it needs perl (with its core modules) and make.
@@ -38,13 +40,14 @@ if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/de
   unshare --net -- sh -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
     ip addr add 198.18.0.1/32 dev lo
     exec "$@"' sh \
-    cargo test --offline -p transport -p agent -p harness \
+    cargo test --offline --workspace \
       --test rtps_loopback --test calls --test agents_multiprocess --test agents_roles --test agents_pause
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
 cargo test --workspace --doc
-# The planted bugs: the scheduler's and the model's tests with the mutation switch built in, and of the command's
-# tests only those that plant bugs (harness/tests/mutants.rs; the others ran above and would only run again).
-cargo test -p bica -p model --features mutants --all-targets
-cargo test -p harness --features mutants --test mutants
+# The planted bugs, in one build with the mutation switch: the tests that plant them (bica's, the model's and the
+# command's tests/mutants.rs, the scheduler model's `mod mutants`), and the convergence and agents models with the
+# switch built in and no bug planted (the baseline: a mutant is killed by the property that holds without it).
+cargo test --workspace --features harness/mutants \
+  --test mutants --test scheduler_model --test convergence_model --test agents_model
