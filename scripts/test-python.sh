@@ -21,8 +21,10 @@ fi
 # cyclonedds: Eclipse Cyclone DDS's Python binding (its wheel bundles the C library), the second vendor's DDS that
 # python/tests/test_ros2_bridge.py runs `cortex bridge ros2` against.
 "$venv/bin/python" -m pip install -q --disable-pip-version-check "maturin>=1.9,<2" "numpy>=1.21" "cyclonedds>=11,<12"
-# `--workspace`: the dependencies get the features the workspace's test build gives them, so it reuses them.
-cargo build -q --workspace --bin cortex
+# The `cortex` binary as the workspace's test build makes it (for the command's own tests): scripts/test.sh runs
+# that build next, which then compiles nothing again (a plain `cargo build` resolves some dependencies' features
+# differently and would compile much of the workspace twice).
+cargo test -q --workspace --all-targets --no-run
 # A debug build, installed into the venv (README: `pip install ./python` builds the release wheel instead).
 VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop -q --manifest-path python/Cargo.toml
 CARGO_TARGET_DIR="$target" "$venv/bin/python" -m unittest discover -s python/tests -t python/tests -v

@@ -35,13 +35,19 @@ cargo test --workspace --all-targets
 # `RtpsConfig::multicast` (default `Auto`) turns multicast on (two participants per transport, one datagram for all
 # same-host readers), plus a non-loopback address on lo as any networked host has (rustdds never routes unicast to
 # a reader that advertises only 127.0.0.1, so per-reader repairs would go to the whole group; measure::netns does the
-# same). The bench tests in harness/tests/bench_netns.rs make their own namespaces.
+# same). The bench tests in harness/tests/bench_netns.rs make their own namespaces. The executables are those the
+# command above built and ran (scripts/test-binaries.py says why not `cargo test --test NAME`), run as cargo runs them.
 if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/dev/null; then
-  unshare --net -- sh -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
+  binaries="$(mktemp)"
+  cargo test --workspace --all-targets --no-run --message-format=json \
+    | python3 scripts/test-binaries.py rtps_loopback calls agents_multiprocess agents_roles agents_pause > "$binaries"
+  unshare --net -- bash -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
     ip addr add 198.18.0.1/32 dev lo
-    exec "$@"' sh \
-    cargo test --offline --workspace \
-      --test rtps_loopback --test calls --test agents_multiprocess --test agents_roles --test agents_pause
+    while IFS="$(printf "\t")" read -r dir executable; do
+      echo "     Running $executable (multicast on lo)"
+      (cd "$dir" && CARGO_MANIFEST_DIR="$dir" "$executable")
+    done < "$1"' bash "$binaries"
+  rm -f "$binaries"
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
