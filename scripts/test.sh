@@ -2,10 +2,11 @@
 # The project's test command (README: "Run the tests"). Everything a test needs is set up here, so a fresh machine
 # needs no hand work.
 #
-# The mutation switch is a cargo feature that a normal build never enables, so the mutant checks build the crates
-# that carry it once more with it. Every cargo command here selects the whole workspace (`--workspace`, with target
-# filters where only some tests run): the features of shared dependencies are then the same in every build, and
-# no dependency is compiled twice.
+# Builds. Cargo resolves the features of some dependencies (build dependencies and proc-macros among them)
+# according to the targets a command selects, and compiles a crate again for each different set: iceoryx2 and much
+# of the workspace, about a minute each time on two cores. So one test build (`--workspace --all-targets`) serves
+# the Python tests, the test run and the multicast rerun; the doc tests (which select otherwise) and the planted bugs
+# (the mutation switch, a cargo feature a normal build never enables) compile what differs for them once more.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # DDS Security's OpenSSL is built from source: it needs perl (with its core modules) and make.
