@@ -166,7 +166,8 @@ fn opaque_keeps_raw_bytes_instead_of_decoding() {
 
 #[test]
 fn container_is_detected_from_content_not_name() {
-    let dir = scratch("detected");
+    let scratch = scratch("detected");
+    let dir = scratch.path();
     let renamed = dir.join("looks_like.mcap");
     std::fs::copy(containers().join("husky_10s_lz4.bag"), &renamed).unwrap();
     let log = Log::open(&renamed, ReadOptions::default()).unwrap();
@@ -251,28 +252,26 @@ fn every_prefix_of_a_described_payload_is_an_error_not_a_panic() {
     }
 }
 
-/// An empty directory of this test process for `test`.
-fn scratch(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("cortex-replay-containers-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// An empty directory for `test`, removed when the returned guard is dropped (at the end of the test, pass or fail).
+fn scratch(test: &str) -> tempfile::TempDir {
+    tempfile::Builder::new().prefix(&format!("cortex-replay-containers-{test}-")).tempdir().unwrap()
 }
 
-/// A copy of a rosbag2 directory in a scratch directory of `test`.
-fn copy_dir(name: &str, test: &str) -> PathBuf {
-    let dir = scratch(test).join(name);
+/// A copy of a rosbag2 directory in a scratch directory of `test`: the guard and the copy's path.
+fn copy_dir(name: &str, test: &str) -> (tempfile::TempDir, PathBuf) {
+    let scratch = scratch(test);
+    let dir = scratch.path().join(name);
     std::fs::create_dir(&dir).unwrap();
     for entry in std::fs::read_dir(containers().join(name)).unwrap() {
         let path = entry.unwrap().path();
         std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
     }
-    dir
+    (scratch, dir)
 }
 
 #[test]
 fn corrupt_sqlite_file_names_the_table() {
-    let dir = copy_dir("husky_10s_sqlite3", "corrupt");
+    let (_scratch, dir) = copy_dir("husky_10s_sqlite3", "corrupt");
     let db = dir.join("husky_10s_sqlite3.db3");
     let mut bytes = std::fs::read(&db).unwrap();
     bytes[16..4096].fill(0xA5);
@@ -286,7 +285,7 @@ fn corrupt_sqlite_file_names_the_table() {
 
 #[test]
 fn corrupt_sqlite_page_is_an_error_at_its_row_and_recovery_keeps_the_rows_before() {
-    let dir = copy_dir("husky_10s_sqlite3", "page");
+    let (_scratch, dir) = copy_dir("husky_10s_sqlite3", "page");
     let db = dir.join("husky_10s_sqlite3.db3");
     let mut bytes = std::fs::read(&db).unwrap();
     bytes[30 * 4096..31 * 4096].fill(0xA5);
@@ -304,7 +303,7 @@ fn corrupt_sqlite_page_is_an_error_at_its_row_and_recovery_keeps_the_rows_before
 
 #[test]
 fn rosbag2_directory_without_metadata_says_so() {
-    let dir = copy_dir("husky_10s_rosbag2_mcap", "no-metadata");
+    let (_scratch, dir) = copy_dir("husky_10s_rosbag2_mcap", "no-metadata");
     std::fs::remove_file(dir.join("metadata.yaml")).unwrap();
     let error = Log::open(&dir, ReadOptions::default()).unwrap_err();
     assert!(error.to_string().contains("needs its metadata.yaml"), "{error}");
@@ -331,7 +330,7 @@ fn definition_that_does_not_parse_is_an_error_for_its_topic_only() {
 
 #[test]
 fn humble_sqlite_without_definitions_reads_and_counts_custom_types_as_unknown() {
-    let dir = copy_dir("custom_radar_diag_sqlite3", "humble");
+    let (_scratch, dir) = copy_dir("custom_radar_diag_sqlite3", "humble");
     let db = rusqlite::Connection::open(dir.join("custom_radar_diag_sqlite3.db3")).unwrap();
     db.execute_batch("DROP TABLE message_definitions").unwrap();
     drop(db);
