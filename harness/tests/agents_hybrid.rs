@@ -12,7 +12,9 @@ mod common;
 use std::process::Command;
 use std::time::Duration;
 
-use common::{Agent, converge, join, pause, seed_nodes, seed_path, signal, spawn_in, spawn_seeded, workspace};
+use common::{
+    Agent, converge, converge_at_least, join, pause, seed_nodes, seed_path, signal, spawn_in, spawn_seeded, workspace,
+};
 
 /// Waits until `agent` knows `peers` same-host peers and has taken samples from the lanes.
 fn wait_on_lanes(agent: &mut Agent, peers: u64) {
@@ -169,12 +171,12 @@ fn an_agent_in_another_network_namespace_is_reached_by_rtps_while_a_same_host_pa
     let log = workspace().join("datasets/logs/euroc_v1_01_easy_cam0_1s.mcap");
     let bridge = ["--join-wait-ms", "20000", "--role", "bridge", "--log", log.to_str().unwrap(), "--loops", "3"];
     let mut again = spawn_in(b, 7, domain, &prefix, &bridge);
-    // Its joining alone can send 20 samples through the lane before the log's first frame; the frame's topic node
-    // and its frame node come with the first frame, in one update, so the graph it streams into is the one to
-    // converge on.
+    // Its joining alone can send 20 samples through the lane before the log's first frame, so it has streamed once
+    // its graph holds nodes of the log. Those come in more than one write (CI saw the agents agree on 27 nodes while
+    // the bridge's status had shown 26): the agents converge on what the bridge has at least.
     let through_lane = |s: &agent::StatusLine| s.ready && s.shm_samples_sent > 20 && s.nodes > nodes + 5;
     let streamed = again.wait_for("frames through the lane", Duration::from_secs(30), through_lane, |_| false);
-    converge(&mut [&mut alone, &mut first, &mut again], streamed.nodes);
+    converge_at_least(&mut [&mut alone, &mut first, &mut again], streamed.nodes);
     wait_on_lanes(&mut again, 1);
     // Everything reached the other host by RTPS, its only path (as written or, for what a fault lost, repaired:
     // this test does not tell the two apart; transport/tests/hybrid.rs checks that pieces go by both paths).

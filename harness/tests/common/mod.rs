@@ -199,15 +199,27 @@ pub fn join(id: u32, domain: u16, prefix: &str, extra: &[&str], nodes: usize) ->
 
 /// Waits until every agent reports `nodes` nodes and one digest.
 pub fn converge(agents: &mut [&mut Agent], nodes: usize) {
+    converge_where(agents, &format!("{nodes} nodes"), |n| n == nodes);
+}
+
+/// Waits until every agent reports one digest and the same number of nodes, at least `nodes` (for a graph that a
+/// writer may still be growing when the wait begins); returns that number.
+pub fn converge_at_least(agents: &mut [&mut Agent], nodes: usize) -> usize {
+    converge_where(agents, &format!("at least {nodes} nodes"), |n| n >= nodes)
+}
+
+fn converge_where(agents: &mut [&mut Agent], what: &str, nodes_ok: impl Fn(usize) -> bool) -> usize {
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
         let statuses: Vec<Option<StatusLine>> = agents.iter_mut().map(|a| a.latest().cloned()).collect();
-        let done = statuses.iter().all(|s| s.as_ref().is_some_and(|s| s.nodes == nodes && s.digest.is_some()))
-            && statuses.windows(2).all(|w| w[0].as_ref().map(|s| &s.digest) == w[1].as_ref().map(|s| &s.digest));
-        if done {
-            return;
+        let done = statuses.iter().all(|s| s.as_ref().is_some_and(|s| nodes_ok(s.nodes) && s.digest.is_some()))
+            && statuses
+                .windows(2)
+                .all(|w| w[0].as_ref().map(|s| (&s.digest, s.nodes)) == w[1].as_ref().map(|s| (&s.digest, s.nodes)));
+        if let (true, Some(Some(first))) = (done, statuses.first()) {
+            return first.nodes;
         }
-        assert!(Instant::now() < deadline, "no convergence on {nodes} nodes within 30 s: {statuses:?}");
+        assert!(Instant::now() < deadline, "no convergence on {what} within 30 s: {statuses:?}");
         std::thread::sleep(Duration::from_millis(50));
     }
 }
