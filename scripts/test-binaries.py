@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Lists the executables of named integration-test targets from cargo's JSON build messages.
 
-Usage: cargo test --workspace --all-targets --no-run --message-format=json | python3 scripts/test-binaries.py NAME...
+Usage: cargo test --workspace --no-run --message-format=json | python3 scripts/test-binaries.py NAME...
 
 Prints one line per executable: its package's directory, a tab, the executable. scripts/test.sh runs some test
 targets a second time in another network namespace this way, from the build that ran them the first time: a cargo

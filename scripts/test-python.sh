@@ -24,7 +24,7 @@ fi
 # The `cortex` binary as the workspace's test build makes it (for the command's own tests): scripts/test.sh runs
 # that build next, which then compiles nothing again (a plain `cargo build` resolves some dependencies' features
 # differently and would compile much of the workspace twice).
-cargo test -q --workspace --all-targets --no-run
+cargo test -q --workspace --no-run
 # A debug build, installed into the venv (README: `pip install ./python` builds the release wheel instead).
 VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop -q --manifest-path python/Cargo.toml
 CARGO_TARGET_DIR="$target" "$venv/bin/python" -m unittest discover -s python/tests -t python/tests -v

@@ -4,9 +4,11 @@
 #
 # Builds. Cargo resolves the features of some dependencies (build dependencies and proc-macros among them)
 # according to the targets a command selects, and compiles a crate again for each different set: iceoryx2 and much
-# of the workspace, about a minute each time on two cores. So one test build (`--workspace --all-targets`) serves
-# the Python tests, the test run and the multicast rerun; the doc tests (which select otherwise) and the planted bugs
-# (the mutation switch, a cargo feature a normal build never enables) compile what differs for them once more.
+# of the workspace, about a minute each time on two cores. So one test build (`cargo test --workspace`: libraries,
+# binaries, tests, examples and doc tests) serves the Python tests, the test run with the doc tests and the
+# multicast rerun, and the planted bugs (the mutation switch, a cargo feature a normal build never enables)
+# compile only the crates the switch changes. The criterion benches are not run here: selecting them
+# (`--all-targets`, `--benches`) resolves the other set; clippy (`--all-targets`, in .ci/run) compiles them.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # DDS Security's OpenSSL is built from source: it needs perl (with its core modules) and make.
@@ -31,7 +33,7 @@ fi
 bash scripts/test-python.sh
 # No import cycle between the modules of any crate (ARCHITECTURE.md, "Conventions").
 python3 scripts/module-cycles.py
-cargo test --workspace --all-targets
+cargo test --workspace
 # The RTPS tests once more in a fresh network namespace whose loopback is multicast-capable, where
 # `RtpsConfig::multicast` (default `Auto`) turns multicast on (two participants per transport, one datagram for all
 # same-host readers), plus a non-loopback address on lo as any networked host has (rustdds never routes unicast to
@@ -40,7 +42,7 @@ cargo test --workspace --all-targets
 # command above built and ran (scripts/test-binaries.py says why not `cargo test --test NAME`), run as cargo runs them.
 if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/dev/null; then
   binaries="$(mktemp)"
-  cargo test --workspace --all-targets --no-run --message-format=json \
+  cargo test --workspace --no-run --message-format=json \
     | python3 scripts/test-binaries.py rtps_loopback calls agents_multiprocess agents_roles agents_pause > "$binaries"
   unshare --net -- bash -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
     ip addr add 198.18.0.1/32 dev lo
@@ -52,7 +54,6 @@ if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/de
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
-cargo test --workspace --doc
 # The planted bugs, in one build with the mutation switch: the tests that plant them (bica's, the model's and the
 # command's tests/mutants.rs, the scheduler model's `mod mutants`), and the convergence and agents models with the
 # switch built in and no bug planted (the baseline: a mutant is killed by the property that holds without it).
