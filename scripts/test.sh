@@ -42,6 +42,7 @@ cargo test --workspace
 # command above built and ran (scripts/test-binaries.py says why not `cargo test --test NAME`), run as cargo runs them.
 if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/dev/null; then
   binaries="$(mktemp)"
+  trap 'rm -f "$binaries"' EXIT
   cargo test --workspace --no-run --message-format=json \
     | python3 scripts/test-binaries.py rtps_loopback calls agents_multiprocess agents_roles agents_pause > "$binaries"
   unshare --net -- bash -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
@@ -50,7 +51,6 @@ if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/de
       echo "     Running $executable (multicast on lo)"
       (cd "$dir" && CARGO_MANIFEST_DIR="$dir" "$executable")
     done < "$1"' bash "$binaries"
-  rm -f "$binaries"
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
