@@ -246,10 +246,13 @@ pub enum Choice {
 /// the model's bookkeeping (which operations a replica has applied), never read by a replica.
 #[derive(Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Msg {
-    /// The delta of one operation (first sent, or re-sent by anti-entropy).
+    /// The delta of one operation (first sent, or re-sent by anti-entropy), with any earlier operations whose
+    /// values it overwrote folded in (anti-entropy only: see [`Replica::missing_for`]).
     Delta {
         /// The operation.
         op: OpId,
+        /// The operations folded in.
+        folded: Vec<OpId>,
         /// [`Delta::encode`]'s bytes.
         bytes: Bytes,
     },
@@ -279,7 +282,13 @@ pub enum Msg {
 impl std::fmt::Debug for Msg {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Msg::Delta { op, bytes } => write!(f, "delta of op {op} ({} bytes)", bytes.len()),
+            Msg::Delta { op, folded, bytes } if folded.is_empty() => {
+                write!(f, "delta of op {op} ({} bytes)", bytes.len())
+            }
+            Msg::Delta { op, folded, bytes } => {
+                let folded: Vec<String> = folded.iter().map(|op| op.to_string()).collect();
+                write!(f, "delta of op {op} with {} folded in ({} bytes)", folded.join(" "), bytes.len())
+            }
             Msg::Damaged { op, bytes } => write!(f, "TRUNCATED delta of op {op} ({} bytes)", bytes.len()),
             Msg::Announce { seen, .. } => write!(f, "announce of {} applied ops", seen.len()),
             Msg::Snapshot { seen, bytes } => write!(f, "snapshot of {} ops ({} bytes)", seen.len(), bytes.len()),
@@ -576,7 +585,7 @@ impl ReplicaActor {
 
     /// Sends a delta to `to` (and, on a duplicating network, a truncated copy of it).
     fn send_delta(&self, to: Id, op: OpId, bytes: &Bytes, o: &mut Out<Self>) {
-        o.send(to, Msg::Delta { op, bytes: bytes.clone() });
+        o.send(to, Msg::Delta { op, folded: Vec::new(), bytes: bytes.clone() });
         if self.config.network == NetworkKind::UnorderedDuplicating {
             // Cut at one of three places, varying with the operation, so every part of the format is cut somewhere.
             let cut = bytes.len() * (1 + (op.counter % 3) as usize) / 4;
@@ -680,10 +689,11 @@ impl Actor for ReplicaActor {
 
     fn on_msg(&self, _id: Id, state: &mut Cow<'_, ReplicaState>, src: Id, msg: Msg, o: &mut Out<Self>) {
         match msg {
-            Msg::Delta { op, bytes } => {
+            Msg::Delta { op, folded, bytes } => {
                 let state = state.to_mut();
                 if self.join_bytes(state, &format!("delta of op {op}"), &bytes) {
                     state.seen.insert(op);
+                    state.seen.extend(folded);
                 }
             }
             Msg::Damaged { op, bytes } => {
@@ -705,7 +715,8 @@ impl Actor for ReplicaActor {
                     for delta in deltas {
                         let origin = delta.origin().expect("retained deltas have an origin");
                         let op = dsr::Dot::new(origin.replica, origin.first);
-                        o.send(src, Msg::Delta { op, bytes: Bytes::from(delta.encode()) });
+                        let folded = state.seen.iter().copied().filter(|op| delta.applied().contains(*op)).collect();
+                        o.send(src, Msg::Delta { op, folded, bytes: Bytes::from(delta.encode()) });
                     }
                 }
                 Missing::Snapshot => {

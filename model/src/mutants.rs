@@ -86,6 +86,11 @@ pub fn dsr_mutant_configs() -> Vec<(DsrMutant, ConvergenceConfig)> {
                 DsrMutant::HistoryOffByOne => {
                     ConvergenceConfig { syncs: 1, history: 1, ..config(2, 2, NetworkKind::Lossy) }
                 }
+                // Two writes of one seed attribute lost, the second folding in the first; an announce answered from
+                // a history of two.
+                DsrMutant::FoldDropsContext => {
+                    ConvergenceConfig { syncs: 1, history: 2, ..config(2, 2, NetworkKind::Lossy) }
+                }
             };
             (mutant, base.with_mutant(mutant))
         })

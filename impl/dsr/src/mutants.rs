@@ -30,6 +30,9 @@ pub enum DsrMutant {
     /// The history is taken to reach one delta further back than it does: the oldest operation a peer lacks is
     /// counted as retained, and the answer leaves it out instead of falling back to a snapshot.
     HistoryOffByOne,
+    /// An operation folded into a later one's retained delta (its values overwritten) travels without its context:
+    /// what it removed stays at a peer that missed it.
+    FoldDropsContext,
     /// Installing a snapshot into a fresh replica drops the snapshot's tombstones.
     InstallDropsTombstones,
     /// The wire format writes a dot of the delta's own replica after the first generated one at one less than
@@ -57,7 +60,7 @@ pub enum DsrMutant {
 
 impl DsrMutant {
     /// Every mutant.
-    pub const ALL: [DsrMutant; 18] = [
+    pub const ALL: [DsrMutant; 19] = [
         DsrMutant::JoinNotIdempotent,
         DsrMutant::RemoveLosesContext,
         DsrMutant::TieBreakByArrival,
@@ -67,6 +70,7 @@ impl DsrMutant {
         DsrMutant::ContextCompactionSkipsGap,
         DsrMutant::SnapshotAppliedFromContext,
         DsrMutant::HistoryOffByOne,
+        DsrMutant::FoldDropsContext,
         DsrMutant::InstallDropsTombstones,
         DsrMutant::CodecDotOffset,
         DsrMutant::NameKeptByDeletedHolder,

@@ -270,3 +270,80 @@ fn anti_entropy_resends_a_lost_write_whose_removal_arrived() {
     }
     assert_eq!(a.digest(), b.digest());
 }
+
+/// A stream of frames: each overwrites the one before, so the history keeps one frame's bytes, and a peer that
+/// missed many frames gets one delta (the current frame under every missed write's context) and converges.
+#[test]
+fn overwritten_frames_fold_into_one_retained_delta() {
+    let (mut a, mut b) = pair();
+    let (cam, d1) = a.insert_node(1, NewNode::new("rgbd", "camera")).unwrap();
+    ship(&d1, &mut b);
+    let frame = |i: u8| Value::Bytes(bytes::Bytes::from(vec![i; 64 * 1024]));
+    let first = a.set_attrs(2, cam, [("cam_rgb", frame(0))]).unwrap();
+    ship(&first, &mut b);
+    for i in 1..=100u8 {
+        a.set_attrs(2 + u64::from(i), cam, [("cam_rgb", frame(i))]).unwrap();
+    }
+    assert_eq!(a.log_payload_bytes(), 64 * 1024, "one frame's bytes retained, not a hundred");
+    assert_eq!(a.log_operations(), 102, "every operation still covered");
+    assert_eq!(a.log_len(), 2, "the insert, and the last frame with the others folded in");
+    let dsr::Missing::Deltas(deltas) = a.missing_for(b.applied()) else { panic!("expected deltas") };
+    assert_eq!(deltas.len(), 1);
+    assert_eq!(deltas[0].payload_bytes(), 64 * 1024);
+    ship(&deltas[0], &mut b);
+    assert_eq!(a.digest(), b.digest());
+    assert_eq!(a.snapshot().store(), b.snapshot().store(), "frame 0 removed, not kept beside frame 100");
+    assert!(matches!(a.missing_for(b.applied()), dsr::Missing::UpToDate));
+}
+
+/// A peer that missed only the last of many folded writes gets that write's delta alone, not the whole fold; one
+/// that missed one in the middle gets the fold from there on.
+#[test]
+fn an_answer_carries_only_the_folded_writes_the_peer_lacks() {
+    let (mut a, mut b) = pair();
+    let (n, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    ship(&d1, &mut b);
+    let mut deltas = Vec::new();
+    for i in 0..10 {
+        deltas.push(a.set_attr(2 + i, n, attrs::POS_X, i as f32).unwrap());
+    }
+    for d in &deltas[..9] {
+        ship(d, &mut b);
+    }
+    let dsr::Missing::Deltas(answer) = a.missing_for(b.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 1);
+    assert_eq!(&*answer[0], &*deltas[9], "the last write alone");
+    let (mut c, _) = pair();
+    ship(&d1, &mut c);
+    for (i, d) in deltas.iter().enumerate() {
+        if i != 6 {
+            ship(d, &mut c);
+        }
+    }
+    let dsr::Missing::Deltas(answer) = a.missing_for(c.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 1);
+    assert_eq!(answer[0].applied().dots().count(), 3, "writes 6, 7 and 8 folded into write 9");
+    ship(&answer[0], &mut c);
+    assert_eq!(a.digest(), c.digest());
+    assert!(matches!(a.missing_for(c.applied()), dsr::Missing::UpToDate));
+}
+
+/// A write that does not overwrite all of an earlier one (the insert's other attribute) leaves it retained whole;
+/// past the operation limit, the oldest operations go first (the insert, then the oldest folded writes), and a
+/// peer lacking one of them gets a snapshot.
+#[test]
+fn folding_keeps_partial_overwrites_and_the_limit_drops_the_oldest_folded_writes() {
+    let (mut a, mut b) = pair();
+    a.set_log_limits(dsr::LogLimits { max_deltas: 3, max_payload_bytes: 1 << 20 });
+    let (n, d1) = a.insert_node(1, NewNode::new("object", "x").with_attr("level", 1)).unwrap();
+    ship(&d1, &mut b);
+    let _lost = a.set_attr(2, n, attrs::LEVEL, 2).unwrap();
+    assert_eq!(a.log_len(), 2, "the insert also made the node: it stays");
+    for i in 3..6 {
+        ship(&a.set_attr(i, n, attrs::LEVEL, i as i32).unwrap(), &mut b);
+    }
+    assert_eq!((a.log_len(), a.log_operations()), (1, 3), "the insert and the lost write dropped");
+    assert!(matches!(a.missing_for(b.applied()), dsr::Missing::Snapshot));
+    ship(&a.snapshot(), &mut b);
+    assert_eq!(a.digest(), b.digest());
+}

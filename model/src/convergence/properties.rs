@@ -228,7 +228,7 @@ pub(super) fn quiescent(state: &State) -> bool {
     state.network.iter_all().all(|envelope| {
         let dst = &state.actor_states[usize::from(envelope.dst)];
         match &envelope.msg {
-            Msg::Delta { op, .. } => dst.seen.contains(op),
+            Msg::Delta { op, folded, .. } => dst.seen.contains(op) && folded.iter().all(|op| dst.seen.contains(op)),
             Msg::Damaged { .. } => true,
             Msg::Announce { .. } => dst.seen.is_subset(&state.actor_states[usize::from(envelope.src)].seen),
             Msg::Snapshot { seen, .. } => seen.is_subset(&dst.seen),

@@ -12,7 +12,9 @@ pub const INCARNATION_LIMIT: u32 = 1 << 20;
 /// Without a recorded incarnation, the floor is drawn from the nonce below this.
 pub const RANDOM_FLOOR_LIMIT: u32 = 1 << 16;
 /// Above this many payload bytes of retained deltas, a missing-request is answered with a snapshot instead when the
-/// snapshot is smaller: the history keeps every overwritten camera frame, a snapshot only the current ones.
+/// snapshot is smaller: the history keeps the values of every operation not wholly overwritten since (a camera frame
+/// written together with a pose, and the next frame written alone, keeps the earlier frame), a snapshot only the
+/// current ones.
 pub const SNAPSHOT_IF_SMALLER_ABOVE_BYTES: usize = 1 << 20;
 /// Most foreign graph ids remembered (each reported once); messages of further ones are refused and counted without
 /// a report.

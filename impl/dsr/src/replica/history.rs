@@ -1,13 +1,16 @@
 //! The retained history for anti-entropy: recent deltas bounded by [`LogLimits`], what a peer lacks
 //! ([`Missing`]), and the snapshot that stands in when the history does not cover it.
 
-use std::collections::{BTreeSet, VecDeque};
+mod log;
+
+use std::collections::BTreeSet;
 use std::sync::Arc;
 
 use super::Replica;
 use crate::causal::CausalContext;
 use crate::delta::{Delta, DeltaParts};
 use crate::mutants::{DsrMutant, Plant};
+pub(super) use log::DeltaLog;
 
 /// What a peer lacks, given its causal context (see [`Replica::missing_for`]).
 #[derive(Clone, Debug)]
@@ -25,40 +28,16 @@ pub enum Missing {
 /// Limits on the history kept for anti-entropy.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct LogLimits {
-    /// Most deltas kept.
+    /// Most operations kept (an operation whose values a later one overwrote counts too, though only its context
+    /// is kept: see [`Replica::missing_for`]).
     pub max_deltas: usize,
-    /// Most attribute payload bytes kept.
+    /// Most attribute payload bytes kept (of values not overwritten since).
     pub max_payload_bytes: usize,
 }
 
 impl Default for LogLimits {
     fn default() -> Self {
         LogLimits { max_deltas: 4096, max_payload_bytes: 64 << 20 }
-    }
-}
-
-/// The retained history: recent deltas (own and received) with their payload sizes, bounded by [`LogLimits`].
-#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
-pub(super) struct DeltaLog {
-    pub(super) deltas: VecDeque<(Arc<Delta>, usize)>,
-    pub(super) payload_bytes: usize,
-    pub(super) limits: LogLimits,
-}
-
-impl DeltaLog {
-    pub(super) fn push(&mut self, delta: Arc<Delta>) {
-        if self.limits.max_deltas == 0 {
-            return;
-        }
-        let size = delta.payload_bytes();
-        self.payload_bytes += size;
-        self.deltas.push_back((delta, size));
-        while self.deltas.len() > self.limits.max_deltas
-            || (self.payload_bytes > self.limits.max_payload_bytes && self.deltas.len() > 1)
-        {
-            let (_, evicted) = self.deltas.pop_front().expect("non-empty log");
-            self.payload_bytes -= evicted;
-        }
     }
 }
 
@@ -103,8 +82,13 @@ impl Replica {
 
     /// What a peer whose joined operations are `peer` (its [`Replica::applied`]) lacks: nothing, a set of retained
     /// deltas, or (when the retained history does not cover the gap) a snapshot.
+    ///
+    /// An operation whose values a later retained one has wholly overwritten (a camera frame and the next) is kept
+    /// as its context alone, folded into the later one's entry, and the two travel as one delta: the later one's
+    /// values under both contexts, with both operations as applied ones (see `history/log.rs`). So a peer that
+    /// missed a hundred frames gets the current one, not a hundred.
     pub fn missing_for(&self, peer: &CausalContext) -> Missing {
-        let Some(missing) = self.applied.missing_from(peer, self.log.deltas.len().max(1) * 4) else {
+        let Some(missing) = self.applied.missing_from(peer, self.log.operations().max(1) * 4) else {
             return Missing::Snapshot;
         };
         if missing.is_empty() {
@@ -112,11 +96,11 @@ impl Replica {
         }
         let mut selected: Vec<Arc<Delta>> = Vec::new();
         let mut covered = BTreeSet::new();
-        for (delta, _) in &self.log.deltas {
-            let origin = delta.origin.expect("logged deltas have an origin");
-            if origin.dots().any(|dot| !peer.contains(dot)) {
-                covered.extend(origin.dots());
-                selected.push(Arc::clone(delta));
+        for entry in self.log.entries() {
+            if let Some(delta) = entry.delta_from(peer, self.plant) {
+                let origin = delta.origin.expect("logged deltas have an origin");
+                covered.extend(origin.dots().chain(delta.applied.dots()));
+                selected.push(delta);
             }
         }
         // Mutant: the oldest missing operation is taken as retained.
@@ -130,8 +114,20 @@ impl Replica {
         Missing::Deltas(selected)
     }
 
-    /// Number of deltas retained for anti-entropy.
+    /// Number of deltas retained for anti-entropy (an operation folded into a later one's delta is not counted).
     pub fn log_len(&self) -> usize {
-        self.log.deltas.len()
+        self.log.len()
+    }
+
+    /// Number of operations the retained history covers, folded ones included (at most
+    /// [`LogLimits::max_deltas`]).
+    pub fn log_operations(&self) -> usize {
+        self.log.operations()
+    }
+
+    /// Attribute payload bytes the retained history holds (at most [`LogLimits::max_payload_bytes`], unless its
+    /// newest delta alone is larger).
+    pub fn log_payload_bytes(&self) -> usize {
+        self.log.payload_bytes()
     }
 }

@@ -51,7 +51,7 @@ impl Replica {
             && self.store.nodes.is_empty()
             && self.store.edges.is_empty()
             && self.store.tombstones.is_empty()
-            && self.log.deltas.is_empty()
+            && self.log.is_empty()
     }
 
     /// The join of a snapshot into a replica that has never held anything ([`Replica::can_install`]), without the
@@ -145,16 +145,15 @@ impl Replica {
     pub(super) fn apply_inner(&mut self, delta: &Delta, shared: impl FnOnce() -> Arc<Delta>) -> Result<(), DeltaError> {
         let new = self.new_names(delta)?;
         names::learn_names(&mut self.dictionary, new);
-        let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)));
+        let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)))
+            && self.applied.includes(&delta.applied);
         self.join(delta);
         for dot in delta.origin.iter().flat_map(Origin::dots) {
             self.applied.insert(dot);
         }
-        if delta.complete {
-            let sender_applied =
-                if self.plant.is(DsrMutant::SnapshotAppliedFromContext) { &delta.ctx } else { &delta.applied };
-            self.applied.merge(sender_applied);
-        }
+        // A snapshot's applied operations are its sender's; a delta's are those folded into it (see `missing_for`).
+        let planted = delta.complete && self.plant.is(DsrMutant::SnapshotAppliedFromContext);
+        self.applied.merge(if planted { &delta.ctx } else { &delta.applied });
         if !duplicate && delta.origin.is_some() && !delta.complete {
             self.log.push(shared());
         }

@@ -1,0 +1,222 @@
+//! The retained history itself: recent operations' deltas, bounded by [`LogLimits`], with overwritten operations
+//! folded into the operation that overwrote them.
+//!
+//! **Folding.** A camera frame written at 20 Hz overwrites the one before; keeping every frame's delta kept every
+//! frame's bytes (64 MiB of frames nobody can see any more, and, where the frames came through shared memory, a
+//! held chunk each). So when a new operation's delta overwrites *everything* an earlier retained delta holds, the
+//! earlier one is not kept as a delta: its origin and causal context join the new entry's `earlier` list, and its
+//! values go. The entry stands for the join of all its operations, which is the newest delta's store under the
+//! union of their contexts ([`Entry::delta_from`]); a peer lacking any of them gets that one delta.
+//!
+//! An earlier delta `e` is overwritten by a new delta `n` when `e` deletes no node, every register `e` lists
+//! (node cores, edge presences, attributes, empty ones included) is listed by `n` too, and every dot of `e`'s
+//! values is in `n`'s context. Then, for any state `x`, `x ⊔ e ⊔ n = x ⊔ (n.store, e.ctx ∪ n.ctx)`: at `e`'s
+//! registers `n`'s context removes what `e` added, and `e`'s context holds no dot of any register `e` does not
+//! list. The same holds for any suffix of an entry's operations, since each one is overwritten by the next or by
+//! the newest; so the count limit drops an entry's oldest folded operations first, and an answer carries only the
+//! suffix from the oldest operation the peer lacks.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+
+use super::LogLimits;
+use crate::causal::CausalContext;
+use crate::delta::{Delta, Origin};
+use crate::ids::Dot;
+use crate::mutants::{DsrMutant, Plant};
+use crate::store::{Attrs, Register};
+
+/// Contexts larger than this are not searched for the deltas they overwrite (a delete of many edges): folding
+/// is a saving, not a duty, and its lookup should cost an operation little.
+const MAX_SEARCHED_DOTS: usize = 64;
+
+/// One retained entry: the newest delta and the operations folded into it.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub(in crate::replica) struct Entry {
+    /// The newest operation's delta, as joined.
+    pub(in crate::replica) delta: Arc<Delta>,
+    /// Its attribute payload bytes.
+    payload_bytes: usize,
+    /// Folded operations, oldest first: their origins and contexts (their values are all overwritten).
+    earlier: VecDeque<(Origin, CausalContext)>,
+}
+
+impl Entry {
+    /// Operations this entry stands for.
+    fn operations(&self) -> usize {
+        1 + self.earlier.len()
+    }
+
+    /// The delta a peer whose operations are `peer` needs from this entry, if it lacks any of them: the newest
+    /// delta alone when it lacks no folded one, else the join of the suffix from the oldest folded operation it
+    /// lacks (the newest store, the suffix's contexts, and the suffix's operations as applied ones).
+    pub(in crate::replica) fn delta_from(&self, peer: &CausalContext, plant: Plant) -> Option<Arc<Delta>> {
+        let lacks = |o: &Origin| o.dots().any(|dot| !peer.contains(dot));
+        let Some(first) = self.earlier.iter().position(|(o, _)| lacks(o)) else {
+            let newest = self.delta.origin.is_some_and(|o| lacks(&o)) || !peer.includes(&self.delta.applied);
+            return newest.then(|| Arc::clone(&self.delta));
+        };
+        let newest = &self.delta;
+        let mut delta = Delta {
+            origin: newest.origin,
+            complete: false,
+            clock: newest.clock,
+            ctx: newest.ctx.clone(),
+            applied: newest.applied.clone(),
+            store: newest.store.clone(),
+            plant: newest.plant,
+        };
+        for (origin, ctx) in self.earlier.iter().skip(first) {
+            // Mutant: a folded operation's context is left out, so what it removed stays at the peer.
+            if !plant.is(DsrMutant::FoldDropsContext) {
+                delta.ctx.merge(ctx);
+            }
+            origin.dots().for_each(|dot| delta.applied.insert(dot));
+        }
+        Some(Arc::new(delta))
+    }
+}
+
+/// The retained history: entries by sequence number (oldest first), bounded by [`LogLimits`] in operations and
+/// in the payload bytes of the values still held.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub(in crate::replica) struct DeltaLog {
+    entries: BTreeMap<u64, Entry>,
+    /// The entry whose newest delta generated each dot range, by the range's last dot (to find what a new
+    /// delta overwrites).
+    by_last_dot: BTreeMap<Dot, u64>,
+    next_seq: u64,
+    operations: usize,
+    payload_bytes: usize,
+    pub(in crate::replica) limits: LogLimits,
+}
+
+impl DeltaLog {
+    /// Whether nothing is retained.
+    pub(in crate::replica) fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Entries retained (folded operations count once with the delta that overwrote them).
+    pub(in crate::replica) fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Operations retained, folded ones included.
+    pub(in crate::replica) fn operations(&self) -> usize {
+        self.operations
+    }
+
+    /// Attribute payload bytes held.
+    pub(in crate::replica) fn payload_bytes(&self) -> usize {
+        self.payload_bytes
+    }
+
+    /// The entries, oldest first.
+    pub(in crate::replica) fn entries(&self) -> impl Iterator<Item = &Entry> {
+        self.entries.values()
+    }
+
+    /// Retains a joined delta of one operation, folding in the retained deltas it overwrites, then applies the
+    /// limits.
+    pub(in crate::replica) fn push(&mut self, delta: Arc<Delta>) {
+        if self.limits.max_deltas == 0 {
+            return;
+        }
+        let mut earlier = VecDeque::new();
+        for seq in self.overwritten_by(&delta) {
+            let entry = self.take(seq);
+            earlier.extend(entry.earlier);
+            let origin = entry.delta.origin.expect("retained deltas have an origin");
+            let ctx = Arc::try_unwrap(entry.delta).map_or_else(|shared| shared.ctx.clone(), |delta| delta.ctx);
+            earlier.push_back((origin, ctx));
+        }
+        let entry = Entry { payload_bytes: delta.payload_bytes(), delta, earlier };
+        self.insert(entry);
+        self.evict();
+    }
+
+    /// The retained entries whose deltas `delta` overwrites wholly (see the module documentation), oldest first.
+    fn overwritten_by(&self, delta: &Delta) -> Vec<u64> {
+        let Some(origin) = delta.origin else { return Vec::new() };
+        let ctx = &delta.ctx;
+        let small = ctx.cloud_len() + ctx.version_vector().iter().map(|(_, n)| *n as usize).sum::<usize>();
+        if !delta.applied.is_empty() || small > MAX_SEARCHED_DOTS {
+            return Vec::new();
+        }
+        let mut found: Vec<u64> = ctx
+            .dots()
+            .filter(|dot| dot.replica != origin.replica || !(origin.first..=origin.last).contains(&dot.counter))
+            .filter_map(|dot| self.generated(dot))
+            .filter(|seq| overwrites(delta, &self.entries[seq].delta))
+            .collect();
+        found.sort_unstable();
+        found.dedup();
+        found
+    }
+
+    /// The entry whose newest delta generated `dot`.
+    fn generated(&self, dot: Dot) -> Option<u64> {
+        let (last, seq) = self.by_last_dot.range(dot..=Dot::new(dot.replica, u64::MAX)).next()?;
+        let origin = self.entries[seq].delta.origin.expect("retained deltas have an origin");
+        (last.replica == dot.replica && origin.first <= dot.counter).then_some(*seq)
+    }
+
+    fn insert(&mut self, entry: Entry) {
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        let origin = entry.delta.origin.expect("retained deltas have an origin");
+        self.by_last_dot.insert(Dot::new(origin.replica, origin.last), seq);
+        self.operations += entry.operations();
+        self.payload_bytes += entry.payload_bytes;
+        self.entries.insert(seq, entry);
+    }
+
+    fn take(&mut self, seq: u64) -> Entry {
+        let entry = self.entries.remove(&seq).expect("a retained entry");
+        let origin = entry.delta.origin.expect("retained deltas have an origin");
+        self.by_last_dot.remove(&Dot::new(origin.replica, origin.last));
+        self.operations -= entry.operations();
+        self.payload_bytes -= entry.payload_bytes;
+        entry
+    }
+
+    /// Drops the oldest operations (an entry's folded ones before the entry) while over the limits; the newest
+    /// entry always stays.
+    fn evict(&mut self) {
+        while self.operations > self.limits.max_deltas
+            || (self.payload_bytes > self.limits.max_payload_bytes && self.entries.len() > 1)
+        {
+            let (&seq, oldest) = self.entries.iter_mut().next().expect("non-empty log");
+            if self.operations > self.limits.max_deltas && oldest.earlier.pop_front().is_some() {
+                self.operations -= 1;
+            } else {
+                self.take(seq);
+            }
+        }
+    }
+}
+
+/// Whether `new` overwrites everything `old` holds (see the module documentation).
+fn overwrites(new: &Delta, old: &Delta) -> bool {
+    let attrs_covered = |mine: &Attrs, theirs: &Attrs| {
+        mine.iter().all(|(name, register)| theirs.contains_key(name) && covered(register, &new.ctx))
+    };
+    old.store.tombstones.is_empty()
+        && old.applied.is_empty()
+        && old.store.nodes.iter().all(|(id, entry)| {
+            new.store
+                .nodes
+                .get(id)
+                .is_some_and(|n| covered(&entry.core, &new.ctx) && attrs_covered(&entry.attrs, &n.attrs))
+        })
+        && old.store.edges.iter().all(|(key, entry)| {
+            let presence = covered(&entry.presence, &new.ctx);
+            new.store.edges.get(key).is_some_and(|n| presence && attrs_covered(&entry.attrs, &n.attrs))
+        })
+}
+
+/// Whether `ctx` holds every dot of `register`'s values.
+fn covered<T: Clone>(register: &Register<T>, ctx: &CausalContext) -> bool {
+    register.dots().all(|dot| ctx.contains(dot))
+}
