@@ -145,8 +145,9 @@ impl Replica {
     pub(super) fn apply_inner(&mut self, delta: &Delta, shared: impl FnOnce() -> Arc<Delta>) -> Result<(), DeltaError> {
         let new = self.new_names(delta)?;
         names::learn_names(&mut self.dictionary, new);
-        let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)))
-            && self.applied.includes(&delta.applied);
+        // A delta whose own operation is joined already is not retained again, even when it carries folded ones
+        // this replica lacked: the history keeps one entry per operation.
+        let duplicate = delta.origin.is_some_and(|o| o.dots().all(|dot| self.applied.contains(dot)));
         self.join(delta);
         for dot in delta.origin.iter().flat_map(Origin::dots) {
             self.applied.insert(dot);

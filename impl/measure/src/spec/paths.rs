@@ -124,17 +124,17 @@ pub struct PayloadPathsExperiment {
     /// Samples per second.
     pub rate_hz: f64,
     /// Unmeasured samples of each size before the measured ones, after the probes. A few settle discovery and the
-    /// first allocations; steady state for a large frame takes enough to fill a receiver's anti-entropy history
-    /// (`dsr::LogLimits::max_payload_bytes`, 64 MiB: 16 frames of 4 MiB), before which every received frame lands
-    /// in heap pages never touched before, or, when it is leased in place (`transport::shm::lease`), the writer's
-    /// next frame in a shared-memory chunk never touched before.
+    /// first allocations and touch the writer's shared-memory chunks. (A receiver's anti-entropy history holds one
+    /// frame of the stream, the others folded into it, so it no longer needs filling: until the twelfth session it
+    /// kept 64 MiB of overwritten frames, and every frame received until then landed in heap pages never touched
+    /// before.)
     #[serde(default = "default_warmup")]
     pub warmup: u32,
-    /// Warm-up to steady state, up to this many samples (0: off). A size whose frames fill a receiver's
-    /// anti-entropy history (64 MiB, [`dsr::LogLimits`]) within `steady_max` samples gets that many warm-up samples,
-    /// plus [`STEADY_MARGIN`], when that is more than `warmup` ([`PayloadPathsExperiment::warmup_for`]): 190 for a
-    /// 360,960 B camera frame, whose receivers otherwise copy every frame of the window into heap pages never
-    /// touched before. A long-running agent is in that steady state; `warmup` alone measures the first seconds.
+    /// Warm-up to steady state, up to this many samples (0: off). A size of which 64 MiB ([`dsr::LogLimits`]'s
+    /// payload limit) takes at most `steady_max` samples gets that many warm-up samples, plus [`STEADY_MARGIN`],
+    /// when that is more than `warmup` ([`PayloadPathsExperiment::warmup_for`]): 190 for a 360,960 B camera frame.
+    /// That was the steady state of a history that kept every overwritten frame (until the twelfth session); the
+    /// setting stays so that runs of either history compare with the same samples.
     #[serde(default)]
     pub steady_max: u32,
 }

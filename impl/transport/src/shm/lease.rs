@@ -2,8 +2,10 @@
 //! out of it.
 //!
 //! A leased chunk stays borrowed from the writer's pool for as long as any `Bytes` over it lives. Where the agent
-//! keeps values, that is the replica's current value and its anti-entropy history, which can be seconds. So leases
-//! are bounded per lane: at most `budget` at once ([`LeasePolicy`]). iceoryx2's own per-subscriber borrow limit is
+//! keeps values, that is while the value is the replica's current one and its anti-entropy history holds it: until
+//! the next frame overwrites it, for a stream of frames (the history folds overwritten operations and drops their
+//! values), but as long as the history keeps the operation when it also wrote something no later operation
+//! overwrote, which can be seconds. So leases are bounded per lane: at most `budget` at once ([`LeasePolicy`]). iceoryx2's own per-subscriber borrow limit is
 //! set one above it (the sample being decided on), so `receive` never fails for want of a borrow. Past the budget,
 //! and below `min_bytes`, a sample is copied out as before.
 //!

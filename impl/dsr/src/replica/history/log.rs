@@ -157,16 +157,21 @@ impl DeltaLog {
 
     /// The entry whose newest delta generated `dot`.
     fn generated(&self, dot: Dot) -> Option<u64> {
-        let (last, seq) = self.by_last_dot.range(dot..=Dot::new(dot.replica, u64::MAX)).next()?;
-        let origin = self.entries[seq].delta.origin.expect("retained deltas have an origin");
-        (last.replica == dot.replica && origin.first <= dot.counter).then_some(*seq)
+        let (_, seq) = self.by_last_dot.range(dot..=Dot::new(dot.replica, u64::MAX)).next()?;
+        let origin = self.entries.get(seq)?.delta.origin?;
+        (origin.first <= dot.counter).then_some(*seq)
     }
 
+    /// Adds an entry, replacing one of the same operation (which the replica does not retain twice).
     fn insert(&mut self, entry: Entry) {
         let seq = self.next_seq;
         self.next_seq += 1;
         let origin = entry.delta.origin.expect("retained deltas have an origin");
-        self.by_last_dot.insert(Dot::new(origin.replica, origin.last), seq);
+        let last = Dot::new(origin.replica, origin.last);
+        if let Some(&same) = self.by_last_dot.get(&last) {
+            self.take(same);
+        }
+        self.by_last_dot.insert(last, seq);
         self.operations += entry.operations();
         self.payload_bytes += entry.payload_bytes;
         self.entries.insert(seq, entry);
