@@ -347,3 +347,34 @@ fn folding_keeps_partial_overwrites_and_the_limit_drops_the_oldest_folded_writes
     ship(&a.snapshot(), &mut b);
     assert_eq!(a.digest(), b.digest());
 }
+
+/// A peer that recovered missed frames through a folded answer folds the frames it had into that answer, and the
+/// answer into the next frame it receives: it too retains one frame, and answers a third replica that missed them
+/// all with one delta.
+#[test]
+fn a_folded_answer_folds_again_at_the_peer_that_received_it() {
+    let (mut a, mut b) = pair();
+    let mut c = Replica::new(ReplicaId(3));
+    let (cam, d1) = a.insert_node(1, NewNode::new("rgbd", "camera")).unwrap();
+    ship(&d1, &mut b);
+    ship(&d1, &mut c);
+    let frame = |i: u64| Value::Bytes(bytes::Bytes::from(vec![i as u8; 64 * 1024]));
+    for i in 0..5 {
+        ship(&a.set_attrs(2 + i, cam, [("cam_rgb", frame(i))]).unwrap(), &mut b);
+    }
+    for i in 5..10 {
+        a.set_attrs(2 + i, cam, [("cam_rgb", frame(i))]).unwrap();
+    }
+    let dsr::Missing::Deltas(answer) = a.missing_for(b.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 1);
+    ship(&answer[0], &mut b);
+    assert_eq!(b.log_payload_bytes(), 64 * 1024, "frame 4 folded into the answer's frame 9");
+    ship(&a.set_attrs(12, cam, [("cam_rgb", frame(10))]).unwrap(), &mut b);
+    assert_eq!((b.log_len(), b.log_payload_bytes()), (2, 64 * 1024), "the insert, and frame 10 with the rest folded");
+    assert_eq!(a.digest(), b.digest());
+    let dsr::Missing::Deltas(answer) = b.missing_for(c.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 1);
+    ship(&answer[0], &mut c);
+    assert_eq!(a.snapshot().store(), c.snapshot().store());
+    assert_eq!(c.applied(), a.applied());
+}

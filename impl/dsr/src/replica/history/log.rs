@@ -30,6 +30,9 @@ use crate::store::{Attrs, Register};
 /// is a saving, not a duty, and its lookup should cost an operation little.
 const MAX_SEARCHED_DOTS: usize = 64;
 
+/// The same for a folded delta received from a peer (an answer, rare), whose context holds its operations' own.
+const MAX_SEARCHED_DOTS_FOLDED: usize = 8192;
+
 /// One retained entry: the newest delta and the operations folded into it.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub(in crate::replica) struct Entry {
@@ -37,6 +40,8 @@ pub(in crate::replica) struct Entry {
     pub(in crate::replica) delta: Arc<Delta>,
     /// Its attribute payload bytes.
     payload_bytes: usize,
+    /// Operations the newest delta carries as applied ones (a folded delta received from a peer).
+    carried: usize,
     /// Folded operations, oldest first: their origins and contexts (their values are all overwritten).
     earlier: VecDeque<(Origin, CausalContext)>,
 }
@@ -44,7 +49,7 @@ pub(in crate::replica) struct Entry {
 impl Entry {
     /// Operations this entry stands for.
     fn operations(&self) -> usize {
-        1 + self.earlier.len()
+        1 + self.carried + self.earlier.len()
     }
 
     /// The delta a peer whose operations are `peer` needs from this entry, if it lacks any of them: the newest
@@ -128,10 +133,18 @@ impl DeltaLog {
             let entry = self.take(seq);
             earlier.extend(entry.earlier);
             let origin = entry.delta.origin.expect("retained deltas have an origin");
+            // A folded delta from a peer: the operations it carries come first, one dot each, and its context
+            // (theirs too) goes with its own operation. A suffix from one of them is then the join of more
+            // operations than it names as applied: still a join of real deltas, each overwritten by the newest.
+            let carried = entry.delta.applied.dots().map(|dot| {
+                (Origin { replica: dot.replica, first: dot.counter, last: dot.counter }, CausalContext::new())
+            });
+            earlier.extend(carried);
             let ctx = Arc::try_unwrap(entry.delta).map_or_else(|shared| shared.ctx.clone(), |delta| delta.ctx);
             earlier.push_back((origin, ctx));
         }
-        let entry = Entry { payload_bytes: delta.payload_bytes(), delta, earlier };
+        let carried = delta.applied.dots().count();
+        let entry = Entry { payload_bytes: delta.payload_bytes(), carried, delta, earlier };
         self.insert(entry);
         self.evict();
     }
@@ -141,7 +154,8 @@ impl DeltaLog {
         let Some(origin) = delta.origin else { return Vec::new() };
         let ctx = &delta.ctx;
         let small = ctx.cloud_len() + ctx.version_vector().iter().map(|(_, n)| *n as usize).sum::<usize>();
-        if !delta.applied.is_empty() || small > MAX_SEARCHED_DOTS {
+        let limit = if delta.applied.is_empty() { MAX_SEARCHED_DOTS } else { MAX_SEARCHED_DOTS_FOLDED };
+        if small > limit {
             return Vec::new();
         }
         let mut found: Vec<u64> = ctx
@@ -208,7 +222,6 @@ fn overwrites(new: &Delta, old: &Delta) -> bool {
         mine.iter().all(|(name, register)| theirs.contains_key(name) && covered(register, &new.ctx))
     };
     old.store.tombstones.is_empty()
-        && old.applied.is_empty()
         && old.store.nodes.iter().all(|(id, entry)| {
             new.store
                 .nodes
