@@ -70,8 +70,9 @@ fn warmup_text(experiment: &crate::spec::PayloadPathsExperiment) -> String {
     match steady.as_slice() {
         [] => format!("{} warm-up samples", experiment.warmup),
         _ => format!(
-            "{} warm-up samples ({}: the samples that fill a receiver's 64 MiB anti-entropy history, so that the \
-             window is at steady state)",
+            "{} warm-up samples ({}: `steady_max`, the samples that filled a receiver's 64 MiB anti-entropy history \
+             when it kept every overwritten frame, kept so that runs compare; the history now folds them and holds \
+             one)",
             experiment.warmup,
             steady.join(", ")
         ),

@@ -168,7 +168,8 @@ impl Default for PayloadPathsExperiment {
 
 impl PayloadPathsExperiment {
     /// The warm-up samples of `size` bytes: `warmup`, or, with [`PayloadPathsExperiment::steady_max`], the samples
-    /// that fill a receiver's anti-entropy history when those are more and at most `steady_max`.
+    /// of 64 MiB (what a history that kept every overwritten frame held) when those are more and at most
+    /// `steady_max`.
     pub fn warmup_for(&self, size: usize) -> u32 {
         let history = dsr::LogLimits::default();
         let fill = history.max_payload_bytes.div_ceil(size.max(1)).min(history.max_deltas);
