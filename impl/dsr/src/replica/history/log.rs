@@ -200,8 +200,8 @@ impl DeltaLog {
         entry
     }
 
-    /// Drops the oldest operations (an entry's folded ones before the entry) while over the limits; the newest
-    /// entry always stays.
+    /// Drops the oldest operations (an entry's folded ones before the entry) while over the limits. The newest entry
+    /// stays, unless it alone carries more operations than the limit (a folded answer from a peer).
     fn evict(&mut self) {
         while self.operations > self.limits.max_deltas
             || (self.payload_bytes > self.limits.max_payload_bytes && self.entries.len() > 1)
