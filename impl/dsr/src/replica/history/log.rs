@@ -37,7 +37,7 @@ const MAX_SEARCHED_DOTS_FOLDED: usize = 8192;
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub(in crate::replica) struct Entry {
     /// The newest operation's delta, as joined.
-    pub(in crate::replica) delta: Arc<Delta>,
+    delta: Arc<Delta>,
     /// Its attribute payload bytes.
     payload_bytes: usize,
     /// Operations the newest delta carries as applied ones (a folded delta received from a peer).
@@ -83,8 +83,10 @@ impl Entry {
 }
 
 /// The retained history: entries by sequence number (oldest first), bounded by [`LogLimits`] in operations and
-/// in the payload bytes of the values still held.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+/// in the payload bytes of the values still held. Two logs are equal when their entries, in order, and limits are:
+/// the sequence numbers, the index and the totals follow from them (the model checker compares replicas, so
+/// equal histories must not differ by how they were numbered).
+#[derive(Clone, Debug, Default)]
 pub(in crate::replica) struct DeltaLog {
     entries: BTreeMap<u64, Entry>,
     /// The entry whose newest delta generated each dot range, by the range's last dot (to find what a new
@@ -94,6 +96,22 @@ pub(in crate::replica) struct DeltaLog {
     operations: usize,
     payload_bytes: usize,
     pub(in crate::replica) limits: LogLimits,
+}
+
+impl PartialEq for DeltaLog {
+    fn eq(&self, other: &DeltaLog) -> bool {
+        self.limits == other.limits && self.entries.values().eq(other.entries.values())
+    }
+}
+
+impl Eq for DeltaLog {}
+
+impl std::hash::Hash for DeltaLog {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.limits.hash(state);
+        self.entries.len().hash(state);
+        self.entries.values().for_each(|entry| entry.hash(state));
+    }
 }
 
 impl DeltaLog {
@@ -158,14 +176,15 @@ impl DeltaLog {
         if small > limit {
             return Vec::new();
         }
-        let mut found: Vec<u64> = ctx
-            .dots()
+        let ranges = ctx.version_vector().iter().flat_map(|&(r, n)| (1..=n).map(move |c| Dot::new(r, c)));
+        let mut found: Vec<u64> = ranges
+            .chain(ctx.cloud().iter().copied())
             .filter(|dot| dot.replica != origin.replica || !(origin.first..=origin.last).contains(&dot.counter))
             .filter_map(|dot| self.generated(dot))
-            .filter(|seq| overwrites(delta, &self.entries[seq].delta))
             .collect();
         found.sort_unstable();
         found.dedup();
+        found.retain(|seq| overwrites(delta, &self.entries[seq].delta));
         found
     }
 
