@@ -1,6 +1,7 @@
 //! Criterion benchmarks of the replica's hot paths, against the targets of the DSR issue (one core):
 //! ≥ 1 M local small-attribute updates/s, ≥ 1 M delta joins/s, an encoded f32 delta ≤ 40 bytes (pinned by a test),
-//! plus snapshot + join of a 10k-node graph and a transform over a 10-edge chain.
+//! plus a write of a series with a full history, snapshot + join of a 10k-node graph and a transform over a 10-edge
+//! chain.
 //!
 //! Run: `cargo bench -p dsr`. Each figure is per operation; throughput is reported in elements/s.
 
@@ -51,6 +52,20 @@ fn local_update(c: &mut Criterion) {
             t += 1;
             i += 1;
             black_box(r.set_attr(t, ids[i % ids.len()], attrs::POS_X, i as f32).unwrap())
+        })
+    });
+    // One attribute written over and over, as a camera or a pose stream writes it: each write folds the one before,
+    // which holds every earlier write of the series the history keeps (4,096 once it is full).
+    group.bench_function("f32_attr_series_on_one_node_full_history", |b| {
+        let node = ids[0];
+        for _ in 0..5_000 {
+            t += 1;
+            r.set_attr(t, node, attrs::POS_X, 0.0f32).unwrap();
+        }
+        b.iter(|| {
+            t += 1;
+            i += 1;
+            black_box(r.set_attr(t, node, attrs::POS_X, i as f32).unwrap())
         })
     });
     group.finish();
