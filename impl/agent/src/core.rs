@@ -515,6 +515,11 @@ impl AgentCore {
                 out.events.push(Event::Rejected { what, error: error.to_string() });
             }
         }
-        out.changes.extend(replica.drain_changes());
+        let changes = replica.drain_changes();
+        if out.changes.is_empty() {
+            out.changes = changes;
+        } else {
+            out.changes.extend(changes);
+        }
     }
 }

@@ -13,6 +13,7 @@ use std::sync::{Arc, Mutex};
 
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
 use dsr::ReplicaId;
+use smallvec::SmallVec;
 use transport::Transport;
 
 use super::{Agent, ChangeSignal};
@@ -51,9 +52,10 @@ impl Signals {
     /// local changes from remote ones.
     pub(super) fn deliver(&self, mine: Option<ReplicaId>, changes: Vec<dsr::ChangeEvent>) {
         // Copied out, so that a callback may register, remove or write (which signals again) without a deadlock.
-        let callbacks: Vec<ChangeCallback> =
+        // Held in place for the few callbacks and changes of a usual write (no allocation on the way to them).
+        let callbacks: SmallVec<[ChangeCallback; 4]> =
             self.callbacks.lock().unwrap_or_else(|p| p.into_inner()).iter().map(|(_, f)| Arc::clone(f)).collect();
-        let signals: Vec<ChangeSignal> = changes
+        let signals: SmallVec<[ChangeSignal; 2]> = changes
             .into_iter()
             .map(|event| ChangeSignal {
                 origin: event.origin.map(AgentId::of_replica),

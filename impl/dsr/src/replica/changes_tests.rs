@@ -16,7 +16,7 @@ fn events(replica: &Replica, delta: &Delta, touched: &changes::Touched) -> Vec<C
     joined.join(delta);
     let after = joined.look(touched);
     joined.set_change_tracking(true);
-    joined.record_changes(&before, &after, delta.origin.map(|o| o.replica));
+    joined.record_changes(touched, &before, &after, delta.origin.map(|o| o.replica));
     joined.drain_changes()
 }
 

@@ -254,7 +254,7 @@ impl Replica {
         self.reindex_names(&names_to_reindex);
         if let (Some(before), Some(watched)) = (before, watched) {
             let after = self.look(&watched);
-            self.record_changes(&before, &after, origin);
+            self.record_changes(&watched, &before, &after, origin);
         }
     }
 
