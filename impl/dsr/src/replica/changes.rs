@@ -74,8 +74,8 @@ pub(super) struct Touched {
 }
 
 /// What is visible of the touched elements (before or after a join), for change events: one entry per touched
-/// element, in [`Touched`]'s order. Held in place for the one or two elements of an attribute write, where maps
-/// of their own cost a receiving agent eight allocations a join (half of them freed from the look before).
+/// element, in [`Touched`]'s order. Held in place for the one or two elements of an attribute write: as maps, the
+/// looks before and after cost a receiving agent eight allocations a join.
 pub(super) struct Visibility {
     /// `None` if invisible, else whether the node shows its plain name (not `name#id`).
     pub(super) nodes: SmallVec<[Option<bool>; 2]>,
