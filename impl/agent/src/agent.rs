@@ -27,6 +27,7 @@ use crate::calls::{CallError, CallServer, CallService, CallTable, PendingCall};
 use crate::core::{AgentCore, Dest, Event, Input, LifeSeed, Output, Send};
 use crate::envelope::{Envelope, Message};
 
+mod drive;
 mod signals;
 mod timer;
 mod writes;
@@ -128,9 +129,6 @@ impl std::fmt::Display for SampleOrigin<'_> {
         write!(f, "{} on channel {}", self.0.origin, self.0.channel.name())
     }
 }
-
-/// The agent's thread's longest wait while joining (it looks at discovery for a new match each time).
-const JOINING_TICK: Duration = Duration::from_millis(2);
 
 struct Inner<T> {
     config: AgentConfig,
@@ -235,72 +233,6 @@ impl<T: Transport + 'static> Agent<T> {
             config,
         };
         Ok(Agent { inner: Arc::new(inner), threads: Mutex::new(Vec::new()) })
-    }
-
-    /// An agent that runs on its own: samples are handled as they arrive — on the transport's receiving thread
-    /// where the transport offers one ([`Transport::set_sink`], RTPS does), else on the agent's own thread — and
-    /// the agent's thread does the periodic work (announces, join retries) when it is due; a third thread publishes
-    /// call replies as they come. An idle agent sleeps: its thread wakes when the protocol core's next deadline
-    /// comes (the next announce, or the quiet announce after a write; rounded up to [`AgentConfig::tick`], at most
-    /// 1 s apart), and the replies thread only for a reply. `clock` must advance in real time, since the threads
-    /// sleep until its deadlines.
-    ///
-    /// # Errors
-    /// As [`Agent::new`], and [`AgentError::Thread`].
-    pub fn start(config: AgentConfig, transport: T, clock: Arc<dyn Clock>) -> Result<Self, AgentError> {
-        let agent = Agent::new(config, transport, clock)?;
-        // Where the transport can, samples are handled on its receiving thread as they arrive: one thread hand-off
-        // less per sample than through the agent's thread, which then only does the periodic work (and handles what
-        // was queued before). The sink holds the agent's state; `shutdown` clears it.
-        let inner = Arc::clone(&agent.inner);
-        let sink: transport::Sink = Arc::new(move |sample| inner.handle(sample));
-        let has_sink = agent.inner.transport.set_sink(Some(sink));
-        let inner = Arc::clone(&agent.inner);
-        agent.spawn("", move || inner.run(has_sink))?;
-        // Publishes the call replies of this agent's server as they come (the server never does I/O itself).
-        let inner = Arc::clone(&agent.inner);
-        agent.spawn("-replies", move || inner.publish_replies())?;
-        Ok(agent)
-    }
-
-    /// Starts a thread named after this agent and `suffix`, joined by [`Agent::shutdown`].
-    fn spawn(&self, suffix: &str, body: impl FnOnce() + std::marker::Send + 'static) -> Result<(), AgentError> {
-        let agent = self.inner.config.id;
-        let handle = std::thread::Builder::new()
-            .name(format!("agent-{}{suffix}", agent.0))
-            .spawn(body)
-            .map_err(|e| AgentError::Thread { agent, detail: e.to_string() })?;
-        self.threads.lock().unwrap_or_else(|p| p.into_inner()).push(handle);
-        Ok(())
-    }
-
-    /// Handles every sample waiting on the transport, then does the periodic work due. Returns the samples
-    /// handled. (For agents made with [`Agent::new`].)
-    pub fn pump(&self) -> usize {
-        let mut handled = 0;
-        while let Some(sample) = self.inner.transport.try_recv() {
-            self.inner.handle(sample);
-            handled += 1;
-        }
-        self.inner.tick();
-        self.flush_call_replies();
-        handled
-    }
-
-    /// Publishes the call replies this agent's server has produced so far (the threaded agent does this on its
-    /// own; an agent driven by hand does it in [`Agent::pump`]). Returns how many.
-    pub fn flush_call_replies(&self) -> usize {
-        let graph = self.inner.lock().core.graph();
-        let replies: Vec<Send> = self
-            .inner
-            .service
-            .outbox_rx
-            .try_iter()
-            .map(|message| Send { channel: Channel::Calls, message, dest: Dest::All, graph, sample: None })
-            .collect();
-        let n = replies.len();
-        self.inner.send(replies, None);
-        n
     }
 
     /// Waits (up to `timeout`) until the agent has its graph; returns whether it has.
@@ -689,51 +621,6 @@ impl<T: Transport> Inner<T> {
                          {mine}; every message of graph {graph} is refused and counted, without another warning"
                     );
                 }
-            }
-        }
-    }
-
-    /// The agent's own thread: sleeps until the periodic work is due (or, without a sink, until a sample arrives),
-    /// handles what is queued on the transport, does the work.
-    fn run(&self, has_sink: bool) {
-        // With a sink the thread sleeps on the timer's bell, which writes ring; without one it waits on the
-        // transport, which writes interrupt where it can ([`Transport::interrupt`]), and else wakes every tick.
-        let longest = if has_sink || self.transport.interrupt() { timer::IDLE_LONGEST } else { self.config.tick() };
-        while !self.stop.load(Ordering::Relaxed) {
-            // While joining, look often: a graph request goes out as soon as discovery matches a peer.
-            let longest = if self.joined.load(Ordering::Relaxed) { longest } else { longest.min(JOINING_TICK) };
-            let wait = self.timer.wait_at(self.clock.now_ns(), longest);
-            let first = if has_sink {
-                self.timer.sleep(wait);
-                self.transport.try_recv()
-            } else {
-                self.transport.recv_timeout(wait)
-            };
-            if let Some(sample) = first {
-                self.handle(sample);
-                for _ in 0..1024 {
-                    let Some(sample) = self.transport.try_recv() else { break };
-                    self.handle(sample);
-                }
-            }
-            // Woken before the deadline (rung, a sample): nothing periodic to do yet. While joining, every look
-            // also checks discovery for a new match.
-            if !self.joined.load(Ordering::Relaxed) || self.timer.is_due(self.clock.now_ns()) {
-                self.tick();
-            }
-        }
-    }
-
-    /// The replies thread: publishes each call reply of this agent's server as it comes, until halted.
-    fn publish_replies(&self) {
-        loop {
-            crossbeam_channel::select! {
-                recv(self.service.outbox_rx) -> reply => {
-                    let Ok(message) = reply else { return };
-                    let graph = self.lock().core.graph();
-                    self.send(vec![Send { channel: Channel::Calls, message, dest: Dest::All, graph, sample: None }], None);
-                }
-                recv(self.halt.1) -> _ => return,
             }
         }
     }

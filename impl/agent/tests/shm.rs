@@ -105,3 +105,44 @@ fn a_point_cloud_arrives_over_shared_memory_as_views_not_copies() {
         assert_eq!((status.large_values_shared, status.large_values_copied), (3, 0));
     }
 }
+
+#[test]
+fn an_agent_driven_by_its_applications_thread_handles_samples_and_runs_callbacks_there() {
+    let (_clock, a, b) = two_ready("driven-callbacks", [111, 112]);
+    let seen_on = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let record = Arc::clone(&seen_on);
+    b.on_change(move |_| record.lock().expect("record").push(std::thread::current().id()));
+    // A write made while b's application thread waits in `pump_wait` wakes it.
+    let cup = std::thread::scope(|scope| {
+        let writer = scope.spawn(|| {
+            std::thread::sleep(Duration::from_millis(20));
+            a.insert_node(NewNode::new("object", "cup").with_attr("pos_x", 1.0f32)).expect("write")
+        });
+        let mut handled = 0;
+        for _ in 0..100 {
+            handled += b.pump_wait(Duration::from_secs(10));
+            if b.node_by_name("cup").is_some() {
+                break;
+            }
+        }
+        assert!(handled >= 1, "b handled the write's sample");
+        writer.join().expect("writer")
+    });
+    assert_eq!(b.node(cup).map(|n| n.name), Some("cup".to_owned()));
+    let threads = seen_on.lock().expect("record").clone();
+    assert!(!threads.is_empty(), "b's callback ran");
+    assert!(threads.iter().all(|t| *t == std::thread::current().id()), "every callback ran on the pumping thread");
+}
+
+#[test]
+fn pump_wait_returns_after_its_timeout_with_nothing_to_do_and_does_the_periodic_work_once_due() {
+    let (clock, a, b) = two_ready("driven-periodic", [121, 122]);
+    while a.pump() + b.pump() > 0 {}
+    // Nothing sent, nothing due on the manual clock: the wait ends at its timeout with nothing handled.
+    assert_eq!(b.pump_wait(Duration::from_millis(20)), 0);
+    assert_eq!(a.pump(), 0, "b sent nothing while nothing was due");
+    // Past the announce interval, b's periodic work is due: the call does it at once, and a hears b's announce.
+    clock.advance(Duration::from_secs(5).as_nanos() as u64);
+    b.pump_wait(Duration::from_secs(60));
+    assert!(a.pump() > 0, "b announced from pump_wait");
+}

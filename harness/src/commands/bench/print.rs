@@ -45,7 +45,11 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
             );
         }
     }
-    let shm = [("agent, shared memory", &result.shm_agent), ("raw shared memory", &result.shm_raw)];
+    let shm = [
+        ("agent, shared memory", &result.shm_agent),
+        ("agent, shm, app-driven", &result.shm_agent_driven),
+        ("raw shared memory", &result.shm_raw),
+    ];
     for (who, f) in shm.into_iter().filter_map(|(who, f)| Some((who, f.as_ref()?))) {
         let socket_bytes = f.socket.as_ref().map_or("-".into(), |s| format!("{:.1}", s.bytes_per_update));
         let repairs = f.gap_requests.map_or("-".into(), |n| n.to_string());
@@ -56,6 +60,13 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
     }
     if let (Some(agent), Some(raw)) = (&result.shm_agent, &result.shm_raw) {
         println!("shared memory: agent p50 / raw p50 = {:.2}", agent.p50_us as f64 / raw.p50_us.max(1) as f64);
+    }
+    if let (Some(driven), Some(raw)) = (&result.shm_agent_driven, &result.shm_raw) {
+        println!(
+            "shared memory: app-driven agent p50 / raw p50 = {:.2} (the pinging agent driven by the bench's thread, \
+             Agent::pump_wait)",
+            driven.p50_us as f64 / raw.p50_us.max(1) as f64
+        );
     }
     for run in &result.runs {
         println!("{} updates: agent p50 / raw p50 = {:.2}", run.updates, run.p50_ratio);

@@ -63,6 +63,9 @@ pub struct RttResult {
     pub multicast: bool,
     /// Two agents over same-host shared memory, same loop (with `RttConfig::shm`).
     pub shm_agent: Option<RttFigures>,
+    /// The same, with the pinging agent driven by the bench's own thread ([`Agent::pump_wait`]) instead of
+    /// threads of its own: its pongs are handled on the thread that writes the pings, as in the raw loop.
+    pub shm_agent_driven: Option<RttFigures>,
     /// Raw samples over the same shared-memory transport, same loop (with `RttConfig::shm`): its limit.
     pub shm_raw: Option<RttFigures>,
     /// Whether the run was in a fresh network namespace (socket-level bytes measured).
@@ -241,17 +244,20 @@ pub fn run(config: &RttConfig, counting: &Counting, program: &Path) -> anyhow::R
             raw,
         });
     }
-    let (shm_agent, shm_raw) = if config.shm {
+    let (shm_agent, shm_agent_driven, shm_raw) = if config.shm {
         let raw = raw(config, UpdateDelivery::Reliable, period, counting, program, true)
             .context("raw ping-pong over shared memory")?;
         let agent = through_agents(config, UpdateDelivery::Reliable, period, counting, program, Via::Shm)
             .context("agent ping-pong over shared memory")?;
-        (Some(agent), Some(raw))
+        let driven = through_agents(config, UpdateDelivery::Reliable, period, counting, program, Via::ShmDriven)
+            .context("agent ping-pong over shared memory, the pinging agent driven by the bench's thread")?;
+        (Some(agent), Some(driven), Some(raw))
     } else {
-        (None, None)
+        (None, None, None)
     };
     Ok(RttResult {
         shm_agent,
+        shm_agent_driven,
         shm_raw,
         payload: config.payload_bytes,
         rate_hz: config.rate_hz,
@@ -335,6 +341,44 @@ enum Via<'a> {
     Secured(&'a Credentials),
     /// Same-host shared memory.
     Shm,
+    /// Same-host shared memory, the pinging agent driven by the bench's thread ([`Agent::pump_wait`]).
+    ShmDriven,
+}
+
+/// The pongs the pinging agent's change callback reports (sequence number, when seen), and how to wait for them.
+struct Pongs {
+    seen: std::sync::mpsc::Receiver<(u64, Instant)>,
+    /// Whether the bench's thread drives the agent: then it handles the samples itself while it waits.
+    driven: bool,
+}
+
+impl Pongs {
+    /// The next pong reported before `until`.
+    fn next(&self, agent: &Agent<Arc<dyn Transport>>, until: Instant) -> Option<(u64, Instant)> {
+        if !self.driven {
+            return self.seen.recv_timeout(until.saturating_duration_since(Instant::now())).ok();
+        }
+        loop {
+            if let Ok(pong) = self.seen.try_recv() {
+                return Some(pong);
+            }
+            let left = until.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            agent.pump_wait(left);
+        }
+    }
+}
+
+/// Waits (up to 10 s) until `agent` has its graph, driving it meanwhile if the bench's thread drives it.
+fn wait_ready(agent: &Agent<Arc<dyn Transport>>, driven: bool) -> anyhow::Result<()> {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while driven && !agent.is_ready() && Instant::now() < deadline {
+        agent.pump_wait(deadline.saturating_duration_since(Instant::now()));
+    }
+    ensure!(agent.wait_ready(deadline.saturating_duration_since(Instant::now())), "the pinging agent did not start");
+    Ok(())
 }
 
 fn through_agents(
@@ -349,11 +393,12 @@ fn through_agents(
         Via::Rtps => "",
         Via::Secured(_) => "sec",
         Via::Shm => "shm",
+        Via::ShmDriven => "shmdriven",
     };
     let prefix = format!("agentrtt{}{}{name}", std::process::id(), updates.name().replace('-', ""));
     let start = counting.counters()?;
     let transport: Arc<dyn Transport> = match via {
-        Via::Shm => Arc::new(shm_transport(&prefix, 1)?),
+        Via::Shm | Via::ShmDriven => Arc::new(shm_transport(&prefix, 1)?),
         Via::Rtps => Arc::new(rtps(config.domain_id, &prefix, config.multicast, updates)?),
         Via::Secured(credentials) => Arc::new(rtps_secured(
             config.domain_id,
@@ -363,13 +408,18 @@ fn through_agents(
             Some(credentials.this.as_path()),
         )?),
     };
-    let agent = Arc::new(Agent::start(bench_config(1, Duration::from_millis(300)), transport, Arc::new(SystemClock))?);
-    if !agent.wait_ready(Duration::from_secs(10)) {
-        bail!("the pinging agent did not start");
-    }
+    let driven = matches!(via, Via::ShmDriven);
+    let (config_1, clock) = (bench_config(1, Duration::from_millis(300)), Arc::new(SystemClock));
+    let agent = Arc::new(if driven {
+        Agent::new(config_1, transport, clock)?
+    } else {
+        Agent::start(config_1, transport, clock)?
+    });
+    wait_ready(&agent, driven)?;
     let ping = agent.insert_node(NewNode::new("object", PING))?;
     let pong = agent.insert_node(NewNode::new("object", PONG))?;
     let (pongs, seen) = std::sync::mpsc::channel::<(u64, Instant)>();
+    let seen = Pongs { seen, driven };
     let weak = Arc::downgrade(&agent);
     let callback = agent.on_change(move |signal| {
         let at = Instant::now();
@@ -380,9 +430,9 @@ fn through_agents(
     });
     let security = match via {
         Via::Secured(credentials) => Some(credentials.helper.as_path()),
-        Via::Rtps | Via::Shm => None,
+        Via::Rtps | Via::Shm | Via::ShmDriven => None,
     };
-    let shm = matches!(via, Via::Shm);
+    let shm = matches!(via, Via::Shm | Via::ShmDriven);
     let args = helper::echo_args(config.domain_id, &prefix, false, config.multicast, updates, security, shm);
     let _helper = Helper::spawn(program, &args)?;
     // The echo agent joins, then echoes; wait for the echo of a probe.
@@ -392,12 +442,12 @@ fn through_agents(
             bail!("the echo agent did not answer within 30 s");
         }
         agent.set_attr(ping, attrs::CAM_RGB, payload_of(u64::MAX, config.payload_bytes))?;
-        if seen.recv_timeout(Duration::from_millis(200)).is_ok() {
+        if seen.next(&agent, Instant::now() + Duration::from_millis(200)).is_some() {
             break 'probe;
         }
     }
-    std::thread::sleep(Duration::from_millis(200));
-    while seen.try_recv().is_ok() {}
+    // Late echoes of the probes: wait for 200 ms without one.
+    while seen.next(&agent, Instant::now() + Duration::from_millis(200)).is_some() {}
     let discovered = counting.counters()?;
     let before = agent.status();
     let counts = ping_pong(
@@ -405,7 +455,7 @@ fn through_agents(
         period,
         |seq| Ok(agent.set_attr(ping, attrs::CAM_RGB, payload_of(seq, config.payload_bytes))?),
         |seq, deadline| {
-            while let Ok((got, at)) = seen.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            while let Some((got, at)) = seen.next(&agent, deadline) {
                 if got == seq {
                     return Some(at);
                 }
