@@ -83,6 +83,32 @@ impl<T: Transport + 'static> Agent<T> {
     ///
     /// Change callbacks then run on this thread, the one that writes: an answer to a write wakes the thread that
     /// wrote, which on a same-host round trip saves a hand-off between the agent's thread and the application's.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use std::time::{Duration, Instant};
+    ///
+    /// use agent::{Agent, AgentConfig, AgentId};
+    /// use dsr::NewNode;
+    /// use transport::SystemClock;
+    /// use transport::inproc::Bus;
+    ///
+    /// let bus = Bus::new();
+    /// let config = |id, join_wait| AgentConfig { join_wait, ..AgentConfig::new(AgentId(id)) };
+    /// // A peer with threads of its own starts the graph.
+    /// let peer = Agent::start(config(2, Duration::from_millis(20)), bus.attach(1024), Arc::new(SystemClock))?;
+    /// assert!(peer.wait_ready(Duration::from_secs(10)));
+    /// let cup = peer.insert_node(NewNode::new("object", "cup"))?;
+    /// // This application's agent joins it, driven by the application's one thread.
+    /// let agent = Agent::new(config(1, Duration::from_secs(10)), bus.attach(1024), Arc::new(SystemClock))?;
+    /// let deadline = Instant::now() + Duration::from_secs(10);
+    /// while agent.node(cup).is_none() && Instant::now() < deadline {
+    ///     // ... the application's own work for this turn, then the agent's:
+    ///     agent.pump_wait(Duration::from_millis(10));
+    /// }
+    /// assert_eq!(agent.node(cup).map(|n| n.name).as_deref(), Some("cup"));
+    /// # Ok::<(), agent::AgentError>(())
+    /// ```
     pub fn pump_wait(&self, timeout: Duration) -> usize {
         let handled = self.inner.serve_once(timeout, false);
         self.flush_call_replies();
