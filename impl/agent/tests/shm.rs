@@ -146,3 +146,31 @@ fn pump_wait_returns_after_its_timeout_with_nothing_to_do_and_does_the_periodic_
     b.pump_wait(Duration::from_secs(60));
     assert!(a.pump() > 0, "b announced from pump_wait");
 }
+
+#[test]
+fn pump_wait_on_a_started_agent_leaves_the_samples_to_its_threads() {
+    let prefix = format!("cortex/test/{}/driven-started", std::process::id());
+    let settings = ShmSettings { max_sample_bytes: 1 << 20, ..ShmSettings::default() };
+    let open = |nonce: u64| ShmTransport::open(&prefix, EndpointId(u128::from(nonce)), &settings).expect("shm");
+    let config = |id, nonce| AgentConfig {
+        nonce: Some(nonce),
+        graph: GraphId::new(0x5b),
+        join_wait: Duration::from_millis(20),
+        ..AgentConfig::new(AgentId(id))
+    };
+    let clock = || Arc::new(transport::SystemClock) as Arc<dyn Clock>;
+    let a = Agent::start(config(1, 131), open(131), clock()).expect("a");
+    assert!(a.wait_ready(Duration::from_secs(10)), "a ready");
+    let b = Agent::start(config(2, 132), open(132), clock()).expect("b");
+    assert!(b.wait_ready(Duration::from_secs(10)), "b ready");
+    let cup = a.insert_node(NewNode::new("object", "cup")).expect("write");
+    let mut handled_here = 0;
+    for _ in 0..1000 {
+        handled_here += b.pump_wait(Duration::from_millis(10));
+        if b.node(cup).is_some() {
+            break;
+        }
+    }
+    assert!(b.node(cup).is_some(), "b's threads received the write");
+    assert_eq!(handled_here, 0, "the started agent's samples are handled by its threads, not by pump_wait");
+}

@@ -79,7 +79,9 @@ impl<T: Transport + 'static> Agent<T> {
     /// [`Agent::new`]): waits for a sample until the agent's periodic work is due, at most `timeout`, handles it and
     /// what is queued behind it, does the periodic work if due and publishes the call replies ready. Returns the
     /// samples handled; it returns early when the periodic work comes due or a local write moves it earlier, so
-    /// call it in a loop, at least every [`AgentConfig::tick`] while the agent is to keep up with the others.
+    /// call it in a loop, at least every [`AgentConfig::tick`] while the agent is to keep up with the others. On an
+    /// agent started with threads of its own ([`Agent::start`]) it only sleeps for `timeout` and returns 0: those
+    /// threads handle the samples.
     ///
     /// Change callbacks then run on this thread, the one that writes: an answer to a write wakes the thread that
     /// wrote, which on a same-host round trip saves a hand-off between the agent's thread and the application's.
@@ -110,6 +112,12 @@ impl<T: Transport + 'static> Agent<T> {
     /// # Ok::<(), agent::AgentError>(())
     /// ```
     pub fn pump_wait(&self, timeout: Duration) -> usize {
+        // A started agent's own thread waits on the transport (holding its wait for up to a second): a second
+        // receiver would wait behind it, past `timeout`. Its threads do the work; this only waits.
+        if !self.threads.lock().unwrap_or_else(|p| p.into_inner()).is_empty() {
+            std::thread::sleep(timeout);
+            return 0;
+        }
         let handled = self.inner.serve_once(timeout, false);
         self.flush_call_replies();
         handled
