@@ -1,7 +1,7 @@
-//! How an agent is driven: by threads of its own ([`Agent::start`]), or by its application's thread, which calls
-//! [`Agent::pump_wait`] in a loop of its own ([`Agent::pump`], which never waits, for a simulation on a manual
-//! clock). Either way a sample goes through the same handling and the periodic work through the same tick; only
-//! the thread differs.
+//! How an agent is driven: by threads of its own ([`Agent::start`]), or by hand — by its application's thread,
+//! which calls [`Agent::pump_wait`] in a loop of its own, or by a simulation on a manual clock, which calls
+//! [`Agent::pump`] (it never waits). Every way, a sample goes through the same handling and the periodic work
+//! through the same tick; only the thread differs.
 //!
 //! A started agent handles samples on the transport's receiving thread (RTPS) or on its own (shared memory), and a
 //! change callback runs there; an application's thread that waits for the change is woken from that thread. An
