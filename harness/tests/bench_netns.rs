@@ -1,7 +1,8 @@
 //! `cortex bench fanout`, `cortex bench rtt` and `cortex bench payload` in fresh network namespaces, where the
 //! loopback counters count exactly the measurement's traffic. Creating a namespace needs root, `unshare` and `ip`
 //! (CI runs `scripts/test.sh` as root); without them these tests print why and skip. Nothing here asserts on speed: only on
-//! bytes that must (or must not) have crossed the wire for the samples that were delivered.
+//! bytes that must (or must not) have crossed the wire for the samples that were delivered, and on the samples
+//! delivered.
 
 use std::process::Command;
 
@@ -143,6 +144,27 @@ fn rtt_in_a_namespace_counts_every_update_with_its_acknowledgements() {
             assert!(number(figures, &["socket", "discovery", "tx_bytes"]) > 0.0, "{side}: discovery was counted");
         }
     }
+}
+
+#[test]
+fn rtt_over_shared_memory_answers_pings_through_threaded_and_app_driven_agents_as_processes() {
+    if !namespaces_available() {
+        return;
+    }
+    let report =
+        cortex_json(&["bench", "rtt", "--shm", "--updates", "reliable", "--rate", "200", "--count", "100", "--json"]);
+    for side in ["shm_agent", "shm_agent_driven", "shm_raw"] {
+        let figures = &report[side];
+        let (measured, lost) = (number(figures, &["count"]), number(figures, &["lost"]));
+        // Every measured ping is answered or counted lost (a pong later than 1 s); over shared memory on one host
+        // nearly all are answered, whichever thread takes the pong.
+        assert_eq!(measured + lost, 100.0, "{side}: {figures}");
+        assert!(measured >= 90.0, "{side}: {figures}");
+        assert!(number(figures, &["p50_us"]) > 0.0, "{side}: {figures}");
+    }
+    // Both agent loops' pings went through the agent's envelope, larger than the raw loop's bare sample.
+    let envelope = |side: &str| number(&report[side], &["envelope_bytes_per_update"]);
+    assert!(envelope("shm_agent_driven") > envelope("shm_raw") && envelope("shm_agent") > envelope("shm_raw"));
 }
 
 #[test]
