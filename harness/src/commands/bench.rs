@@ -169,7 +169,8 @@ pub struct RttArgs {
     /// beside the unprotected ones in the same run.
     #[arg(long)]
     pub security: bool,
-    /// Also measure two agents over same-host shared memory (iceoryx2, `transport::shm`) in the same run.
+    /// Also measure two agents over same-host shared memory (iceoryx2, `transport::shm`) in the same run: threaded,
+    /// and "app-driven" (the pinging agent driven by the bench's own thread, `Agent::pump_wait`).
     #[arg(long)]
     pub shm: bool,
     /// Print one JSON object.

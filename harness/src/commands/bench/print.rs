@@ -58,15 +58,13 @@ pub(super) fn rtt(result: &RttResult, counting: &Counting) {
             f.p50_us, f.p90_us, f.p99_us, f.max_us, f.lost, f.envelope_bytes_per_update, "-", "-"
         );
     }
-    if let (Some(agent), Some(raw)) = (&result.shm_agent, &result.shm_raw) {
-        println!("shared memory: agent p50 / raw p50 = {:.2}", agent.p50_us as f64 / raw.p50_us.max(1) as f64);
-    }
-    if let (Some(driven), Some(raw)) = (&result.shm_agent_driven, &result.shm_raw) {
-        println!(
-            "shared memory: app-driven agent p50 / raw p50 = {:.2} (the pinging agent driven by the bench's thread, \
-             Agent::pump_wait)",
-            driven.p50_us as f64 / raw.p50_us.max(1) as f64
-        );
+    // The app-driven loop's pinging agent is driven by the bench's own thread (`Agent::pump_wait`).
+    let agents = [("agent", &result.shm_agent), ("app-driven agent", &result.shm_agent_driven)];
+    for (who, agent) in agents {
+        if let (Some(agent), Some(raw)) = (agent, &result.shm_raw) {
+            let ratio = agent.p50_us as f64 / raw.p50_us.max(1) as f64;
+            println!("shared memory: {who} p50 / raw p50 = {ratio:.2}");
+        }
     }
     for run in &result.runs {
         println!("{} updates: agent p50 / raw p50 = {:.2}", run.updates, run.p50_ratio);

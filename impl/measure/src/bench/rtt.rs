@@ -46,7 +46,8 @@ pub struct RttConfig {
     pub updates: Vec<UpdateDelivery>,
     /// Also through agents protected by DDS Security with these credentials, beside the unprotected agents.
     pub security: Option<Credentials>,
-    /// Also measure two agents over same-host shared memory (`transport::shm::ShmTransport`) in the same run.
+    /// Also measure two agents over same-host shared memory (`transport::shm::ShmTransport`) in the same run,
+    /// threaded and with the pinging agent driven by the bench's thread.
     pub shm: bool,
 }
 
