@@ -22,7 +22,7 @@ use crate::core::{Dest, Send};
 const JOINING_TICK: Duration = Duration::from_millis(2);
 
 /// Samples handled in one turn of a driving loop, before it looks at the periodic work.
-const BATCH: usize = 1025;
+const BATCH: usize = 1024;
 
 impl<T: Transport + 'static> Agent<T> {
     /// An agent that runs on its own: samples are handled as they arrive — on the transport's receiving thread
