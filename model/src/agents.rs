@@ -119,7 +119,7 @@ impl AgentsConfig {
             // period unless the configuration sets a smaller group (`AgentCore::announce_interval_ns`).
             announce_group: self.announce_group,
             quiet_announce_ns: ANNOUNCE_NS / 4,
-            log_limits: LogLimits { max_deltas: self.history, max_payload_bytes: 1 << 20 },
+            log_limits: LogLimits { max_deltas: self.history, max_payload_bytes: 1 << 20, fold_min_payload_bytes: 0 },
             max_buffered_deltas: 16,
             max_batch_bytes: 256 << 10,
             answer_hold_ns: RETRY_NS,

@@ -646,7 +646,7 @@ impl Actor for ReplicaActor {
         let mut replica = Replica::new(self.replica_id());
         let max_deltas = if self.config.keeps_history() { self.config.history } else { 0 };
         // Without loss or announces nothing is ever re-sent, so the history would only multiply states.
-        replica.set_log_limits(dsr::LogLimits { max_deltas, max_payload_bytes: 1 << 20 });
+        replica.set_log_limits(dsr::LogLimits { max_deltas, max_payload_bytes: 1 << 20, fold_min_payload_bytes: 0 });
         #[cfg(feature = "mutants")]
         replica.plant_mutant(self.config.planted);
         replica.apply(&self.seed.snapshot).expect("the seed graph applies");

@@ -99,8 +99,9 @@
 //!
 //! **Anti-entropy and late join.** [`Replica::snapshot`] is the whole state as a delta. [`Replica::missing_for`]
 //! takes a peer's context and returns the retained deltas it lacks, or a snapshot when the bounded history
-//! ([`LogLimits`]) does not cover the gap. The history keeps no value that a later retained operation has
-//! overwritten: such an operation is folded into the later one, and the two travel as one delta.
+//! ([`LogLimits`]) does not cover the gap. The history keeps no value that a later retained write of 1 KiB or more
+//! (a camera frame, a scan) has overwritten: such an operation is folded into the later one, and the two travel as
+//! one delta.
 //! [`Replica::digest`] is a BLAKE3 hash of the canonical visible graph ([`VisibleGraph`]), equal on two replicas
 //! exactly when their visible graphs are.
 //!

@@ -225,12 +225,16 @@ proptest! {
         steps in prop::collection::vec(step(), 1..50),
         fates in prop::collection::vec(any::<bool>(), 64),
         lossy_log in any::<bool>(),
+        fold_min_payload_bytes in prop::sample::select(vec![0, 8, usize::MAX]),
     ) {
         let mut world = World::new(3);
+        // Every write folds, the larger ones only, or none.
+        let mut limits = dsr::LogLimits { fold_min_payload_bytes, ..dsr::LogLimits::default() };
         if lossy_log {
-            for replica in &mut world.replicas {
-                replica.set_log_limits(dsr::LogLimits { max_deltas: 2, max_payload_bytes: 1 << 20 });
-            }
+            limits.max_deltas = 2;
+        }
+        for replica in &mut world.replicas {
+            replica.set_log_limits(limits);
         }
         // Each broadcast copy is delivered or lost by a random fate: partial delivery is what makes a replica's
         // causal context run ahead of the operations it has joined.

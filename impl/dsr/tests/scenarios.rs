@@ -6,6 +6,11 @@ fn pair() -> (Replica, Replica) {
     (Replica::new(ReplicaId(1)), Replica::new(ReplicaId(2)))
 }
 
+/// Limits under which every write folds, small values too (the default folds values of 1 KiB and more).
+fn folding_every_write() -> dsr::LogLimits {
+    dsr::LogLimits { fold_min_payload_bytes: 0, ..dsr::LogLimits::default() }
+}
+
 fn ship(delta: &Delta, to: &mut Replica) {
     let decoded = Delta::decode(&delta.encode()).expect("decodes");
     assert_eq!(&decoded, delta, "wire round trip");
@@ -301,6 +306,7 @@ fn overwritten_frames_fold_into_one_retained_delta() {
 #[test]
 fn an_answer_carries_only_the_folded_writes_the_peer_lacks() {
     let (mut a, mut b) = pair();
+    a.set_log_limits(folding_every_write());
     let (n, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
     ship(&d1, &mut b);
     let mut deltas = Vec::new();
@@ -328,13 +334,41 @@ fn an_answer_carries_only_the_folded_writes_the_peer_lacks() {
     assert!(matches!(a.missing_for(c.applied()), dsr::Missing::UpToDate));
 }
 
+/// By default only writes of 1 KiB or more fold: a stream of small values is kept write by write (finding what
+/// a write overwrites would cost it as much again), and a peer that missed some gets each one; a frame written on
+/// the same node still folds the frame before it, and leaves the small writes alone.
+#[test]
+fn by_default_small_writes_are_kept_apart_and_frames_fold() {
+    let (mut a, mut b) = pair();
+    let (n, d1) = a.insert_node(1, NewNode::new("rgbd", "camera")).unwrap();
+    ship(&d1, &mut b);
+    let frame = |i: u8| Value::Bytes(bytes::Bytes::from(vec![i; 1024]));
+    ship(&a.set_attrs(2, n, [("cam_rgb", frame(0))]).unwrap(), &mut b);
+    for i in 0..10u64 {
+        let write = a.set_attr(3 + i, n, attrs::POS_X, i as f32).unwrap();
+        if i < 4 {
+            ship(&write, &mut b);
+        }
+    }
+    assert_eq!((a.log_len(), a.log_operations()), (12, 12), "the insert, the frame and ten small writes");
+    let dsr::Missing::Deltas(answer) = a.missing_for(b.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 6, "each small write b lacks");
+    a.set_attrs(13, n, [("cam_rgb", frame(1))]).unwrap();
+    assert_eq!((a.log_len(), a.log_operations()), (12, 13), "the new frame folds the one before");
+    assert_eq!(a.log_payload_bytes(), 1024 + 10 * 4, "one frame's bytes and the small writes'");
+    let dsr::Missing::Deltas(answer) = a.missing_for(b.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 7);
+    answer.iter().for_each(|delta| ship(delta, &mut b));
+    assert_eq!(a.digest(), b.digest());
+}
+
 /// A write that does not overwrite all of an earlier one (the insert's other attribute) leaves it retained whole;
 /// past the operation limit, the oldest operations go first (the insert, then the oldest folded writes), and a
 /// peer lacking one of them gets a snapshot.
 #[test]
 fn folding_keeps_partial_overwrites_and_the_limit_drops_the_oldest_folded_writes() {
     let (mut a, mut b) = pair();
-    a.set_log_limits(dsr::LogLimits { max_deltas: 3, max_payload_bytes: 1 << 20 });
+    a.set_log_limits(dsr::LogLimits { max_deltas: 3, max_payload_bytes: 1 << 20, fold_min_payload_bytes: 0 });
     let (n, d1) = a.insert_node(1, NewNode::new("object", "x").with_attr("level", 1)).unwrap();
     ship(&d1, &mut b);
     let _lost = a.set_attr(2, n, attrs::LEVEL, 2).unwrap();
@@ -377,4 +411,39 @@ fn a_folded_answer_folds_again_at_the_peer_that_received_it() {
     ship(&answer[0], &mut c);
     assert_eq!(a.snapshot().store(), c.snapshot().store());
     assert_eq!(c.applied(), a.applied());
+}
+
+/// The history's oldest entry (an insert) outlives a long stream of folded writes to another node: the history
+/// still finds each write's predecessor to fold it (three entries throughout), answers a peer that missed part of
+/// the stream with the fold from there on, and one that missed everything with every retained operation.
+#[test]
+fn a_long_stream_folds_behind_an_old_entry_and_answers_stay_whole() {
+    let (mut a, mut b) = pair();
+    a.set_log_limits(folding_every_write());
+    let (x, d1) = a.insert_node(1, NewNode::new("object", "x")).unwrap();
+    let (y, d2) = a.insert_node(2, NewNode::new("object", "y")).unwrap();
+    ship(&d1, &mut b);
+    ship(&d2, &mut b);
+    for i in 0..1_000u64 {
+        let write = a.set_attr(3 + i, y, attrs::POS_X, i as f32).unwrap();
+        if i < 600 {
+            ship(&write, &mut b);
+        }
+        assert_eq!(a.log_len(), 3, "write {i}: the two inserts and the stream's one entry");
+    }
+    assert_eq!(a.log_operations(), 1_002);
+    let dsr::Missing::Deltas(answer) = a.missing_for(b.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 1, "the stream's entry from the first write b lacks");
+    assert_eq!(answer[0].applied().dots().count(), 399, "writes 600 to 998 folded into write 999");
+    ship(&answer[0], &mut b);
+    assert_eq!(a.digest(), b.digest());
+    let mut c = Replica::new(ReplicaId(3));
+    c.set_log_limits(folding_every_write());
+    let dsr::Missing::Deltas(answer) = a.missing_for(c.applied()) else { panic!("expected deltas") };
+    assert_eq!(answer.len(), 3);
+    answer.iter().for_each(|delta| ship(delta, &mut c));
+    assert_eq!(a.digest(), c.digest());
+    assert_eq!(c.applied(), a.applied());
+    ship(&a.set_attr(2_000, x, attrs::POS_X, 1.0).unwrap(), &mut c);
+    assert_eq!(c.log_len(), 4, "x's insert, y's insert, y's stream and x's write");
 }

@@ -33,11 +33,16 @@ pub struct LogLimits {
     pub max_deltas: usize,
     /// Most attribute payload bytes kept (of values not overwritten since).
     pub max_payload_bytes: usize,
+    /// An operation writing at least this many attribute payload bytes folds in the retained operations it
+    /// overwrites (0: every operation does). Folding drops overwritten values early and answers a peer that
+    /// missed a stream's writes with one delta, but finding what a write overwrites costs about as much as the
+    /// write of a small value itself, so smaller writes are kept apart until the limits drop them.
+    pub fold_min_payload_bytes: usize,
 }
 
 impl Default for LogLimits {
     fn default() -> Self {
-        LogLimits { max_deltas: 4096, max_payload_bytes: 64 << 20 }
+        LogLimits { max_deltas: 4096, max_payload_bytes: 64 << 20, fold_min_payload_bytes: 1024 }
     }
 }
 
@@ -83,10 +88,11 @@ impl Replica {
     /// What a peer whose joined operations are `peer` (its [`Replica::applied`]) lacks: nothing, a set of retained
     /// deltas, or (when the retained history does not cover the gap) a snapshot.
     ///
-    /// An operation whose values a later retained one has wholly overwritten (a camera frame and the next) is kept
-    /// as its context alone, folded into the later one's entry, and the two travel as one delta: the later one's
-    /// values under both contexts, with both operations as applied ones (see `history/log.rs`). So a peer that
-    /// missed a hundred frames gets the current one, not a hundred.
+    /// An operation whose values a later retained one of at least [`LogLimits::fold_min_payload_bytes`] has wholly
+    /// overwritten (a camera frame and the next) is kept as its context alone, folded into the later one's entry,
+    /// and the two travel as one delta: the later one's values under both contexts, with both operations as applied
+    /// ones (see `history/log.rs`). So a peer that missed a hundred frames gets the current one, not a hundred.
+    /// Smaller writes (a pose, a scalar) are kept one by one and answered one by one.
     pub fn missing_for(&self, peer: &CausalContext) -> Missing {
         let Some(missing) = self.applied.missing_from(peer, self.log.operations().max(1) * 4) else {
             return Missing::Snapshot;
