@@ -108,6 +108,11 @@ pub struct ConvergenceConfig {
     /// Deltas each replica keeps for anti-entropy (when there is loss or there are announces); a gap wider than
     /// this is answered with a snapshot.
     pub history: usize,
+    /// Writes of at least this many attribute payload bytes fold the retained ones they overwrite
+    /// ([`dsr::LogLimits::fold_min_payload_bytes`]). 0, the default, folds every write; 8 folds the RT edge's
+    /// writes (12 and 24 B) and keeps the `level` writes (4 B) apart, as the replica's default of 1 KiB does with
+    /// frames and poses.
+    pub fold_min_payload_bytes: usize,
     /// The network.
     pub network: NetworkKind,
     /// A planted bug (with the `mutants` feature).
@@ -127,6 +132,7 @@ impl Default for ConvergenceConfig {
             ticks: 1,
             syncs: 0,
             history: 1,
+            fold_min_payload_bytes: 0,
             network: NetworkKind::UnorderedNonduplicating,
             mutant: None,
             #[cfg(feature = "mutants")]
@@ -646,7 +652,8 @@ impl Actor for ReplicaActor {
         let mut replica = Replica::new(self.replica_id());
         let max_deltas = if self.config.keeps_history() { self.config.history } else { 0 };
         // Without loss or announces nothing is ever re-sent, so the history would only multiply states.
-        replica.set_log_limits(dsr::LogLimits { max_deltas, max_payload_bytes: 1 << 20, fold_min_payload_bytes: 0 });
+        let fold_min_payload_bytes = self.config.fold_min_payload_bytes;
+        replica.set_log_limits(dsr::LogLimits { max_deltas, max_payload_bytes: 1 << 20, fold_min_payload_bytes });
         #[cfg(feature = "mutants")]
         replica.plant_mutant(self.config.planted);
         replica.apply(&self.seed.snapshot).expect("the seed graph applies");

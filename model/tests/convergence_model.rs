@@ -53,6 +53,17 @@ fn announces_at_any_time_with_a_history_of_one_repair_loss() {
     assert_eq!(check(announces).unique_states, 144_101);
 }
 
+/// The same with the replica's default fold threshold (1 KiB), above every write of the model, so no write folds:
+/// the history's path without folding keeps every property. With a history of one operation, folding and not
+/// folding reach the same states, hence the same count.
+#[test]
+fn announces_repair_loss_with_the_default_fold_threshold_where_no_write_folds() {
+    let fold_min_payload_bytes = dsr::LogLimits::default().fold_min_payload_bytes;
+    let unfolded =
+        ConvergenceConfig { syncs: 2, history: 1, fold_min_payload_bytes, ..config(2, 2, NetworkKind::Lossy) };
+    assert_eq!(check(unfolded).unique_states, 144_101);
+}
+
 #[test]
 fn snapshots_answer_when_there_is_no_history() {
     let snapshots = ConvergenceConfig { syncs: 1, history: 0, ..config(3, 2, NetworkKind::UnorderedNonduplicating) };

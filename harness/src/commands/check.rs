@@ -89,6 +89,10 @@ struct ConvergenceArgs {
     /// Deltas each replica keeps for anti-entropy (with loss or announces); older gaps get a snapshot.
     #[arg(long, default_value_t = 1)]
     history: usize,
+    /// Writes of at least this many attribute payload bytes fold the retained writes they overwrite (0: every
+    /// write; 8: the RT edge's writes fold and the 4 B `level` writes are kept apart).
+    #[arg(long, default_value_t = 0)]
+    fold_min_bytes: usize,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -176,6 +180,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
                 ticks: args.ticks,
                 syncs: args.syncs,
                 history: args.history,
+                fold_min_payload_bytes: args.fold_min_bytes,
                 network: args.network,
                 ..Default::default()
             };
