@@ -1,6 +1,7 @@
 //! Measured runs whose receivers are separate `cortex measure-receiver` processes over RTPS on loopback.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use measure::run::{Link, RunConfig, run};
 use measure::workload::synthetic;
@@ -55,4 +56,62 @@ fn a_missing_receiver_program_is_an_error_not_a_hang() {
     config.receiver_program = None;
     let error = run(&workload, &config).unwrap_err();
     assert!(format!("{error:#}").contains("receiver program"), "{error:#}");
+}
+
+/// A receiver program for one-receiver runs that, on each of its first `silent` starts, stays alive without ever
+/// answering (as a receiver whose discovery never completes does), and runs `cortex measure-receiver` after that.
+/// Each start adds a line to `dir/starts`.
+fn silent_then_real(dir: &Path, silent: u32) -> PathBuf {
+    let starts = dir.join("starts");
+    let script = dir.join("receiver.sh");
+    let body = format!(
+        "#!/bin/sh\nn=$(cat '{starts}' 2>/dev/null | wc -l)\necho start >> '{starts}'\n\
+         if [ \"$n\" -lt {silent} ]; then exec sleep 60; fi\nexec '{cortex}' \"$@\"\n",
+        starts = starts.display(),
+        cortex = env!("CARGO_BIN_EXE_cortex"),
+    );
+    std::fs::write(&script, body).unwrap();
+    let mut permissions = std::fs::metadata(&script).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut permissions, 0o755);
+    std::fs::set_permissions(&script, permissions).unwrap();
+    script
+}
+
+fn starts(dir: &Path) -> usize {
+    std::fs::read_to_string(dir.join("starts")).map(|text| text.lines().count()).unwrap_or(0)
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("measure-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn a_receiver_that_never_answers_the_probes_is_started_again_and_the_run_says_so() {
+    let dir = scratch("restart");
+    let workload = synthetic(64, 200.0, 10, 2).unwrap();
+    let mut config = config(2, 76);
+    config.receiver_program = Some(silent_then_real(&dir, 1));
+    config.probe_window = Duration::from_millis(500);
+    let result = run(&workload, &config).unwrap();
+    assert_eq!((result.start_attempts, starts(&dir)), (2, 2));
+    assert!(result.digests_equal && result.writes_not_everywhere == 0, "{result:?}");
+    let json = serde_json::to_value(&result).unwrap();
+    assert_eq!(json["start_attempts"], 2, "a restarted run says so in results.json");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn receivers_that_never_answer_fail_the_run_after_the_last_start_and_are_named() {
+    let dir = scratch("silent");
+    let workload = synthetic(64, 200.0, 10, 2).unwrap();
+    let mut config = config(2, 77);
+    config.receiver_program = Some(silent_then_real(&dir, u32::MAX));
+    config.probe_window = Duration::from_millis(300);
+    let error = format!("{:#}", run(&workload, &config).unwrap_err());
+    assert!(error.contains("0 of 1 receiver processes answered") && error.contains("replicas [2]"), "{error}");
+    assert_eq!(starts(&dir), measure::process::START_ATTEMPTS as usize);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -150,6 +150,7 @@ pub(crate) fn summarise(
         bandwidth,
         process_peak_rss_bytes,
         agent_costs,
+        start_attempts: 1,
         latency_histogram: latency.histogram().clone(),
         convergence_histogram: windows,
         timeline,

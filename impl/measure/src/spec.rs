@@ -376,6 +376,9 @@ pub struct RunConfig {
     /// The program that runs a receiver process ([`Link::Processes`]): an executable taking
     /// `measure-receiver --spec JSON` and calling `measure::process::receiver_main`, e.g. the `cortex` binary.
     pub receiver_program: Option<std::path::PathBuf>,
+    /// How long the source of a [`Link::Processes`] run probes for its receivers before it starts them again
+    /// ([`crate::process::PROBE_WINDOW`] by default; see `measure::process`).
+    pub probe_window: Duration,
 }
 
 impl Default for RunConfig {
@@ -388,6 +391,7 @@ impl Default for RunConfig {
             inbox_capacity: 1 << 20,
             settle_timeout: Duration::from_secs(20),
             receiver_program: None,
+            probe_window: crate::process::PROBE_WINDOW,
         }
     }
 }

@@ -104,6 +104,7 @@ fn run(workload: &str, transport: &str, agents: u32, seed: u64, base_ns: u64) ->
         },
         process_peak_rss_bytes: Some(80 << 20),
         agent_costs: costs,
+        start_attempts: 1,
         latency_histogram: latencies,
         convergence_histogram: windows,
         timeline: Default::default(),
@@ -328,6 +329,24 @@ fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("measure-golden-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     dir
+}
+
+/// A run whose receivers were started again is named in the provenance table (the frozen copy has none).
+#[test]
+fn a_run_started_again_is_named_where_the_report_says_how_it_was_obtained() {
+    let mut results = results();
+    results.replay[0].start_attempts = 2;
+    let out = temp_dir("restarted");
+    measure::report::write(&results, &out).unwrap();
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let row = report.lines().find(|line| line.starts_with("| runs started again |")).expect("the row");
+    let run = &results.replay[0];
+    let named =
+        format!("{} over {} with {} agents, seed {}: 2 starts", run.workload, run.transport, run.agents, run.seed);
+    assert!(row.contains(&named), "{row}");
+    let json = std::fs::read_to_string(out.join("results.json")).unwrap();
+    assert_eq!(json.matches("\"start_attempts\"").count(), 1, "only the restarted run carries the count");
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]

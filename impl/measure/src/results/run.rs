@@ -93,6 +93,11 @@ pub struct RunResult {
     pub process_peak_rss_bytes: Option<u64>,
     /// CPU and memory per agent, the source first (schema 2: replaces `source_cpu_ns` and `receiver_cpu_ns`).
     pub agent_costs: Vec<AgentCost>,
+    /// How many times the run's receivers were started: 1, or for `rtps-processes` more when some receiver did
+    /// not answer the source's probes and the run started again with new processes (`measure::process`, at most
+    /// [`crate::process::START_ATTEMPTS`]). In `results.json` only when above 1.
+    #[serde(skip_serializing_if = "is_first")]
+    pub start_attempts: u32,
     /// Every latency, for merging runs (not serialised; the percentiles and CDF points are).
     #[serde(skip)]
     pub latency_histogram: Histogram<u64>,
@@ -104,7 +109,13 @@ pub struct RunResult {
     pub timeline: WriteTimeline,
 }
 
-/// in a [`RunResult`] so the run can be recorded after it ends.
+/// Whether a run's receivers were started once ([`RunResult::start_attempts`]).
+fn is_first(attempts: &u32) -> bool {
+    *attempts <= 1
+}
+
+/// Publication and application times of a run's first writes (at most [`MAX_TIMELINE_WRITES`]), kept in a
+/// [`RunResult`] so the run can be recorded after it ends.
 #[derive(Clone, Debug, Default)]
 pub struct WriteTimeline {
     receivers: u32,
