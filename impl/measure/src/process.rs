@@ -9,7 +9,7 @@
 //! 1. the source starts the N−1 receiver processes ([`RunConfig::receiver_program`]);
 //! 2. it publishes probes on `Updates` until every receiver has answered one on `Sync` (RTPS discovery; a
 //!    reliable volatile reader matched late would miss the first writes). If some receiver has not answered
-//!    within [`RunConfig::probe_window`] ([`PROBE_WINDOW`] by default), every receiver is stopped and the run
+//!    within [`RunConfig::probe_window`] ([`PROBE_WINDOW`](crate::spec::PROBE_WINDOW) by default), every receiver is stopped and the run
 //!    starts again with new processes, a new participant and new topics, at most [`START_ATTEMPTS`] times in
 //!    all; the result counts the starts ([`RunResult::start_attempts`]). Nothing is measured before every
 //!    receiver has answered, so a start that did not get that far leaves no trace in the figures;
@@ -50,12 +50,9 @@ const PROBE_ANSWER: u64 = u64::MAX - 1;
 const STOP: u64 = u64::MAX - 2;
 /// How long a receiver waits for its first probe before giving up.
 const FIRST_PROBE_WAIT: Duration = Duration::from_secs(60);
-/// How long the source probes, by default, before it gives up on a start of the run's receivers
-/// ([`RunConfig::probe_window`]).
-pub const PROBE_WINDOW: Duration = Duration::from_secs(30);
 /// Starts of a run's receivers before a run whose receivers do not all answer the probes fails. On the 2-core
 /// machine, two of about sixty runs of 16 processes (2026-11-28) had one receiver whose answers never reached the
-/// source within [`PROBE_WINDOW`]; in the one looked at, the source's updates writer had matched every receiver's
+/// source within [`PROBE_WINDOW`](crate::spec::PROBE_WINDOW); in the one looked at, the source's updates writer had matched every receiver's
 /// reader: a discovery between two rustdds participants that did not complete.
 pub const START_ATTEMPTS: u32 = 3;
 

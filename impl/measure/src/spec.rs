@@ -358,6 +358,10 @@ impl ScalingExperiment {
     }
 }
 
+/// How long the source of a [`Link::Processes`] run probes, by default, before it gives up on a start of the
+/// run's receivers ([`RunConfig::probe_window`]).
+pub const PROBE_WINDOW: Duration = Duration::from_secs(30);
+
 /// How an experiment runs.
 #[derive(Clone, Debug)]
 pub struct RunConfig {
@@ -377,7 +381,7 @@ pub struct RunConfig {
     /// `measure-receiver --spec JSON` and calling `measure::process::receiver_main`, e.g. the `cortex` binary.
     pub receiver_program: Option<std::path::PathBuf>,
     /// How long the source of a [`Link::Processes`] run probes for its receivers before it starts them again
-    /// ([`crate::process::PROBE_WINDOW`] by default; see `measure::process`).
+    /// ([`PROBE_WINDOW`] by default; see `measure::process`).
     pub probe_window: Duration,
 }
 
@@ -391,7 +395,7 @@ impl Default for RunConfig {
             inbox_capacity: 1 << 20,
             settle_timeout: Duration::from_secs(20),
             receiver_program: None,
-            probe_window: crate::process::PROBE_WINDOW,
+            probe_window: PROBE_WINDOW,
         }
     }
 }

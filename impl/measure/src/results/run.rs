@@ -94,8 +94,8 @@ pub struct RunResult {
     /// CPU and memory per agent, the source first (schema 2: replaces `source_cpu_ns` and `receiver_cpu_ns`).
     pub agent_costs: Vec<AgentCost>,
     /// How many times the run's receivers were started: 1, or for `rtps-processes` more when some receiver did
-    /// not answer the source's probes and the run started again with new processes (`measure::process`, at most
-    /// [`crate::process::START_ATTEMPTS`]). In `results.json` only when above 1.
+    /// not answer the source's probes and the run started again with new processes (at most
+    /// `measure::process::START_ATTEMPTS`). In `results.json` only when above 1.
     #[serde(skip_serializing_if = "is_first")]
     pub start_attempts: u32,
     /// Every latency, for merging runs (not serialised; the percentiles and CDF points are).
