@@ -180,6 +180,7 @@ fn payload_paths() -> PayloadPathsResult {
         cpu_ns_per_sample: cpu,
         loopback_bytes_per_sample: loopback,
         to_iceoryx2: None,
+        session_starts: 1,
     };
     let cells = vec![
         cell(PayloadPath::Agents(agent::Link::Shm), 3_000_000, Some(2_400_000.0), Some(0.0)),

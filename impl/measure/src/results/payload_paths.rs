@@ -48,6 +48,11 @@ pub struct PayloadCell {
     pub loopback_bytes_per_sample: Option<f64>,
     /// This cell's figures over raw iceoryx2's for the same size and receivers, when both were measured.
     pub to_iceoryx2: Option<PathRatios>,
+    /// How many times this cell's receivers were started: 1, or more when some did not answer the probes and its
+    /// session started again with new processes (at most `measure::bench::payload::SESSION_STARTS`). In
+    /// `results.json` only when above 1.
+    #[serde(skip_serializing_if = "super::run::is_first")]
+    pub session_starts: u32,
 }
 
 /// A cell's figures over another's.
@@ -124,6 +129,7 @@ mod tests {
             cpu_ns_per_sample: Some(p50_ns as f64),
             loopback_bytes_per_sample: Some(0.0),
             to_iceoryx2: None,
+            session_starts: 1,
         }
     }
 

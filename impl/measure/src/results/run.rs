@@ -109,8 +109,8 @@ pub struct RunResult {
     pub timeline: WriteTimeline,
 }
 
-/// Whether a run's receivers were started once ([`RunResult::start_attempts`]).
-fn is_first(attempts: &u32) -> bool {
+/// Whether a run's receivers were started once ([`RunResult::start_attempts`], [`super::PayloadCell::session_starts`]).
+pub(super) fn is_first(attempts: &u32) -> bool {
     *attempts <= 1
 }
 

@@ -64,18 +64,30 @@ impl NumberedWriter for Writer {
     }
 }
 
-/// Every size of `experiment` from an agent here to agents in `receivers` processes of `program`, over `link`.
+/// Which session of agents: over which link, to how many receivers, on which DDS domain, and which start of it.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Session {
+    /// The agents' link.
+    pub(super) link: Link,
+    /// Receiver processes.
+    pub(super) receivers: u32,
+    /// DDS domain of agents over RTPS.
+    pub(super) domain: u16,
+    /// 1 for the session's first start, 2 for the next ([`super::with_restarts`]): each start has topics of its own.
+    pub(super) start: u32,
+}
+
+/// Every size of `experiment` from an agent here to agents in `session.receivers` processes of `program`.
 pub(super) fn session(
     experiment: &PayloadPathsExperiment,
-    link: Link,
-    receivers: u32,
-    domain: u16,
+    session: &Session,
     counting: &Counting,
     program: &Path,
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<Vec<PayloadCell>> {
+    let Session { link, receivers, domain, start } = *session;
     let path = PayloadPath::Agents(link);
-    let prefix = format!("payload{}{}n{receivers}", std::process::id(), link.name());
+    let prefix = format!("payload{}{}n{receivers}s{start}", std::process::id(), link.name());
     let agent = link.start(config(1, Duration::from_millis(300)), rtps(domain, &prefix), None)?;
     if !agent.wait_ready(Duration::from_secs(10)) {
         bail!("the writing agent did not start");

@@ -104,16 +104,18 @@ impl Drop for LaneWriter {
     }
 }
 
-/// Every size of `experiment` from the transport here to `receivers` receiver processes of `program`.
+/// Every size of `experiment` from the transport here to `receivers` receiver processes of `program`, on services of
+/// their own for each `start` of the session.
 pub(super) fn session(
     experiment: &PayloadPathsExperiment,
     receivers: u32,
+    start: u32,
     counting: &Counting,
     program: &Path,
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<Vec<PayloadCell>> {
     let path = PayloadPath::Transport;
-    let prefix = format!("cortex/bench/payload/{}/transport/n{receivers}", std::process::id());
+    let prefix = format!("cortex/bench/payload/{}/transport/n{receivers}/s{start}", std::process::id());
     let mut writer = LaneWriter::open(&prefix, receivers).context("opening the shared-memory transport")?;
     let (helpers, pids) =
         spawn_receivers(program, receivers, |i| helper::payload_receiver_args(path.name(), 0, &prefix, i))?;

@@ -9,7 +9,6 @@
 
 use std::time::{Duration, Instant};
 
-use anyhow::bail;
 use bytes::Bytes;
 use transport::{Clock as _, SystemClock};
 
@@ -30,12 +29,24 @@ pub(super) const NUMBER: u64 = PROBE - 1;
 pub(super) const STOP: u64 = u64::MAX;
 /// Probes of one size go out this far apart until every receiver has answered one.
 const PROBE_INTERVAL: Duration = Duration::from_millis(200);
-/// How long the receivers have to answer the first probe (discovery and join included).
-const FIRST_ANSWER_TIMEOUT: Duration = Duration::from_secs(60);
+/// How long the receivers have to answer a probe (for the first size, discovery and join included) before the
+/// session gives up and starts again with new receivers ([`super::SESSION_STARTS`]).
+const FIRST_ANSWER_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long the receivers have to answer the last sample of a size before its window closes anyway.
 pub(super) const LAST_ANSWER_TIMEOUT: Duration = Duration::from_secs(20);
 /// A receiver that hears nothing from the writer for this long gives up.
 pub(super) const WRITER_SILENT: Duration = Duration::from_secs(60);
+
+/// The receivers of a session did not all answer a probe in time (as when an RTPS discovery between two
+/// participants never completes): the session starts again with new receivers ([`super::SESSION_STARTS`]).
+#[derive(Debug, thiserror::Error)]
+#[error("the receivers did not all answer a probe of {size_bytes} B within {window:?}")]
+pub(super) struct ProbesUnanswered {
+    /// Bytes of the probe.
+    pub(super) size_bytes: usize,
+    /// How long the writer probed.
+    pub(super) window: Duration,
+}
 
 /// The writer of a session with receiver processes: what it writes, and what its receivers have answered.
 pub(super) trait NumberedWriter {
@@ -75,7 +86,7 @@ pub(super) trait NumberedWriter {
     /// Probes of `size` bytes until every receiver has answered one.
     ///
     /// # Errors
-    /// A write that fails; no answer within [`FIRST_ANSWER_TIMEOUT`].
+    /// A write that fails; no answer within [`FIRST_ANSWER_TIMEOUT`] ([`ProbesUnanswered`]).
     fn probe(&mut self, size: usize) -> anyhow::Result<()> {
         let deadline = Instant::now() + FIRST_ANSWER_TIMEOUT;
         let (first, _) = self.write(size, PROBE | ANSWER)?;
@@ -84,7 +95,7 @@ pub(super) trait NumberedWriter {
                 return Ok(());
             }
             if Instant::now() > deadline {
-                bail!("the receivers did not all answer a probe of {size} B within 60 s");
+                return Err(ProbesUnanswered { size_bytes: size, window: FIRST_ANSWER_TIMEOUT }.into());
             }
             self.write(size, PROBE | ANSWER)?;
         }

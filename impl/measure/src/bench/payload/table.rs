@@ -85,6 +85,9 @@ pub fn notes(result: &PayloadPathsResult) -> Vec<String> {
             experiment.count
         ));
     }
+    if let Some(restarted) = restarted_sessions(result) {
+        notes.push(restarted);
+    }
     notes.push(if result.netns {
         "loopback B/sample: bytes sent on the namespace's loopback over the window (every process of the run), per \
          sample"
@@ -94,6 +97,24 @@ pub fn notes(result: &PayloadPathsResult) -> Vec<String> {
             .to_owned()
     });
     notes
+}
+
+/// The sessions whose receivers were started more than once ([`PayloadCell::session_starts`]), as a note; `None`
+/// when every session started once.
+fn restarted_sessions(result: &PayloadPathsResult) -> Option<String> {
+    let mut sessions: Vec<String> = Vec::new();
+    for cell in result.cells.iter().filter(|c| c.session_starts > 1) {
+        let session = format!("{} to {} ({} starts)", cell.path.label(), cell.receivers, cell.session_starts);
+        if !sessions.contains(&session) {
+            sessions.push(session);
+        }
+    }
+    (!sessions.is_empty()).then(|| {
+        format!(
+            "started again: {} (a receiver did not answer the probes; nothing is measured before all have answered)",
+            sessions.join("; ")
+        )
+    })
 }
 
 /// The table as text: the heading, a header row and a row per cell, the notes, and the targets.
@@ -204,6 +225,7 @@ mod tests {
             cpu_ns_per_sample: Some(1_500.0),
             loopback_bytes_per_sample: Some(loopback),
             to_iceoryx2: None,
+            session_starts: 1,
         }
     }
 
@@ -247,6 +269,17 @@ mod tests {
             assert_eq!(line.matches('|').count(), COLUMNS.len() + 1, "{line}");
         }
         assert!(lines[2].starts_with("| 360960 | 8 | raw iceoryx2 | 4/4 | 200.0 |"), "{md}");
+    }
+
+    #[test]
+    fn sessions_started_again_are_named_once_each_and_only_then() {
+        let mut result = result();
+        assert!(!notes(&result).iter().any(|n| n.starts_with("started again")));
+        result.cells.iter_mut().filter(|c| c.receivers == 8).for_each(|c| c.session_starts = 2);
+        let notes = notes(&result);
+        let started: Vec<&String> = notes.iter().filter(|n| n.starts_with("started again")).collect();
+        assert_eq!(started.len(), 1, "{notes:?}");
+        assert!(started[0].contains("raw iceoryx2 to 8 (2 starts); agents, shm to 8 (2 starts) ("), "{notes:?}");
     }
 
     #[test]
