@@ -367,7 +367,7 @@ pub struct ReplicaState {
 pub struct ReplicaHashes {
     /// [`Replica`]'s own [`Hash`]: everything it holds.
     pub whole: u64,
-    /// What it replicates ([`properties::crdt_fingerprint`]).
+    /// What it replicates (`properties::crdt_fingerprint`).
     pub crdt: u64,
 }
 

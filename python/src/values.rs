@@ -1,12 +1,12 @@
 //! Python values ⇄ `dsr::Value`: the type a Python value takes when it becomes an attribute, the conversions an
 //! attribute name of a known type allows, and the numpy arrays that vectors and images come back as.
 //!
-//! The rules follow pydsr's (its pybind11 variant tries the value types in a fixed order): `str` → string, `bool`
-//! → bool, a non-negative `int` → u64 and a negative one → i32, `float` → f64, a numpy array of `uint8` / `float32`
-//! / `uint64` → vec<u8> / vec<f32> / vec<u64>, a list of ints 0..=255 → vec<u8>, of larger ints → vec<u64>, of
-//! floats → vec<f32>. A name whose type is known then narrows the value as pydsr's attribute map does: u64 → u32
-//! or i32, f64 → f32, vec<f32> → [f32; N], vec<u8> → vec<u64>. Unknown names keep the type they are first seen
-//! with in this process, as in pydsr.
+//! The rules follow pydsr's (its pybind11 variant tries the value types in a fixed order): `str` → string, `bool` →
+//! bool, a non-negative `int` → u64 and a negative one → i32, `float` → f64, a numpy array of `uint8` / `float32` /
+//! `uint64` → `vec<u8>` / `vec<f32>` / `vec<u64>`, a list of ints 0..=255 → `vec<u8>`, of larger ints → `vec<u64>`, of
+//! floats → `vec<f32>`. A name whose type is known then narrows the value as pydsr's attribute map does: u64 → u32 or
+//! i32, f64 → f32, `vec<f32>` → [f32; N], `vec<u8>` → `vec<u64>`. Unknown names keep the type they are first seen with
+//! in this process, as in pydsr.
 //!
 //! Copies: a C-contiguous numpy array of the attribute's own element type, or `bytes`, becomes an attribute in one
 //! `memcpy` into the attribute's own buffer (`bytes::Bytes`, `dsr::Numbers<f32>`, `dsr::Numbers<u64>`); an

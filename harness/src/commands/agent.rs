@@ -153,7 +153,7 @@ pub struct TransportArg(pub Link);
 
 super::value_enum_by_name!(TransportArg, Link::ALL);
 
-/// `--updates`: how the transport sends [`Channel::Updates`] ([`UpdateDelivery`]).
+/// `--updates`: how the transport sends [`transport::Channel::Updates`] ([`UpdateDelivery`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum UpdatesArg {
     /// Reliable, like every channel (every reader acknowledges every sample).

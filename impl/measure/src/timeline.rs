@@ -16,7 +16,7 @@
 //!   It busy-waits (spins on the clock) rather than sleeps, so it really holds the scheduler thread and the CPU.
 //!
 //! Every scheduler decision is read back from the bica trace ring ([`bica::trace::TraceEvent`], drained every
-//! 100 ms): [`derive`] turns the events into one [`StepRecord`] per top-level detector step (release, start,
+//! 100 ms): [`fn@derive`] turns the events into one [`StepRecord`] per top-level detector step (release, start,
 //! finish, lateness, skipped releases, miss), the achieved frequency over a sliding window, per-phase summaries
 //! (before, during and after the overload) and the number of top-level steps that started before the previous one
 //! finished. The derivation is pure, and [`run_with_clock`] takes any [`Clock`], so the tests run the same code on

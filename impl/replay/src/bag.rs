@@ -1,7 +1,7 @@
 //! The ROS 1 bag reader (format 2.0): the file's records are walked once from the start — the bag header, chunks
 //! (uncompressed, `bz2` or `lz4`) holding connection and message-data records, the index records after each chunk, and
 //! the index section the bag header points to (connections and chunk infos) — and every connection and message is
-//! gathered into [`Contents`] in the same form as an MCAP file's: a connection is a channel (`ros1` message encoding)
+//! gathered into `Contents` in the same form as an MCAP file's: a connection is a channel (`ros1` message encoding)
 //! with a schema named by its ROS 1 type (`sensor_msgs/Imu`, encoding `ros1msg`) whose text is the connection's
 //! `message_definition`.
 //!

@@ -1,5 +1,5 @@
 //! The MCAP reader: the file's records are walked once from the start (chunks decompressed one at a time, their CRCs
-//! checked), and every schema, channel and message is gathered into [`Contents`]; [`crate::log`] sorts the messages
+//! checked), and every schema, channel and message is gathered into `Contents`; [`crate::log`] sorts the messages
 //! and decides what damage means. Only the MCAP format is interpreted here (records, chunks, compression `""`,
 //! `zstd`, `lz4`).
 

@@ -1,5 +1,5 @@
 //! rosbag2 bags: a directory with a `metadata.yaml` naming its storage (`sqlite3`, the default up to ROS 2 Humble,
-//! or `mcap`) and its storage files (`relative_file_paths`). Each file is read into the same [`Contents`] as an MCAP
+//! or `mcap`) and its storage files (`relative_file_paths`). Each file is read into the same `Contents` as an MCAP
 //! file's, and the files' messages are joined (sorted by log time by [`crate::log`]).
 //!
 //! SQLite storage is read through `rusqlite` (SQLite built from source, so nothing is needed on the machine): the

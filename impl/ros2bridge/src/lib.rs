@@ -12,7 +12,7 @@
 //!   graph, [`encode`] writes the CDR, the inverse of `replay::ros2`'s decoders).
 //!
 //! The cores ([`inbound`], [`graph_out`], [`encode`], [`config`]) do no I/O and read no clock; [`runtime`] owns the
-//! DDS participant and the two threads ([`reader`] for In, [`writer`] for Out), and [`status`] is what they report.
+//! DDS participant and the two threads (`reader` for In, `writer` for Out), and [`status`] is what they report.
 
 pub mod config;
 pub mod encode;

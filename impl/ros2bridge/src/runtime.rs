@@ -1,6 +1,6 @@
 //! [`Ros2Bridge`]: the bridge's DDS side on the ROS 2 domain — one `rustdds` participant, a reader per input topic
 //! and a writer per output topic, with ROS 2's topic names, type names and QoS — and its two threads (In:
-//! [`crate::reader`], Out: [`crate::writer`]) over an [`Agent`] of the graph.
+//! `reader`, Out: `writer`) over an [`Agent`] of the graph.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};

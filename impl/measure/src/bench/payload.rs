@@ -52,7 +52,7 @@ const SETTLE_LIMIT: Duration = Duration::from_secs(10);
 /// How long the receivers have to report after the run.
 const REPORT_TIMEOUT: Duration = Duration::from_secs(30);
 /// How many times a session's receivers are started at most: a session whose receivers do not all answer a probe
-/// ([`numbering::ProbesUnanswered`]) stops them and starts again with new processes on new services or topics.
+/// (`numbering::ProbesUnanswered`) stops them and starts again with new processes on new services or topics.
 pub const SESSION_STARTS: u32 = 3;
 
 /// What an agent receiver process prints when it stops (one JSON line).

@@ -1,6 +1,6 @@
 //! Round-trip time of one attribute between two agent processes, beside raw `rustdds` ping-pong between two
 //! processes over the same transport (the transport's limit), for each delivery of updates asked for. Both loops
-//! are [`ping_pong`]: a ping waits for its pong (or 1 s), then for its slot; the first [`WARMUP`] are not measured.
+//! are `ping_pong`: a ping waits for its pong (or 1 s), then for its slot; the first [`WARMUP`] are not measured.
 
 use std::path::Path;
 use std::sync::Arc;

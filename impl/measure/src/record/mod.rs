@@ -32,7 +32,7 @@
 //!
 //! Two producers use it: `cortex replay --out DIR` through [`RecordingSink`] (deltas as the bridge publishes them,
 //! latencies as the in-process receivers apply them), and `cortex report` through [`write_runs`] (one file per run,
-//! from each [`RunResult`]'s bounded [`WriteTimeline`]).
+//! from each [`crate::results::RunResult`]'s bounded [`crate::results::WriteTimeline`]).
 
 use std::collections::BTreeMap;
 use std::fs::File;

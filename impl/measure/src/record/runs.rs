@@ -29,7 +29,7 @@ pub fn summary_of(result: &RunResult) -> RunSummary {
     }
 }
 
-/// Records a finished run from its [`WriteTimeline`]: bandwidth windows of its publications, a latency message per
+/// Records a finished run from its [`crate::results::WriteTimeline`]: bandwidth windows of its publications, a latency message per
 /// (write, receiver) that was applied, a convergence window per write that reached every receiver, all in log-time
 /// order, then the summary.
 ///

@@ -131,7 +131,7 @@ pub struct PayloadPathsExperiment {
     #[serde(default = "default_warmup")]
     pub warmup: u32,
     /// Warm-up to steady state, up to this many samples (0: off). A size of which 64 MiB ([`dsr::LogLimits`]'s
-    /// payload limit) takes at most `steady_max` samples gets that many warm-up samples, plus [`STEADY_MARGIN`],
+    /// payload limit) takes at most `steady_max` samples gets that many warm-up samples, plus `STEADY_MARGIN`,
     /// when that is more than `warmup` ([`PayloadPathsExperiment::warmup_for`]): 190 for a 360,960 B camera frame.
     /// That was the steady state of a history that kept every overwritten frame (until the twelfth session); the
     /// setting stays so that runs of either history compare with the same samples.

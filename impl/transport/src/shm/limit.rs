@@ -265,7 +265,7 @@ impl LimitSender {
 
 /// A receiver of the raw limit (run it in a process of its own): opens the services of `prefix` made by a
 /// [`LimitSender`], announces itself as receiver `index`, then answers every round with the time it took the sample
-/// on `clock`, until told to stop or [`RECEIVER_IDLE`] passes without a sample.
+/// on `clock`, until told to stop or `RECEIVER_IDLE` passes without a sample.
 ///
 /// # Errors
 /// [`ShmError::Open`] when the sender's services do not exist (open the sender first), [`ShmError::Io`] when a

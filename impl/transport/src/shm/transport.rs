@@ -225,7 +225,7 @@ impl Transport for ShmTransport {
         }
     }
 
-    /// Notifies this endpoint's own listener (which its publishes never do) with [`INTERRUPT`].
+    /// Notifies this endpoint's own listener (which its publishes never do) with `INTERRUPT`.
     fn interrupt(&self) -> bool {
         self.notifier.for_each_listener(|listener, details| {
             if details.listener_id == self.listener_id
