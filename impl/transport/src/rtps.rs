@@ -1,11 +1,21 @@
 //! RTPS through `rustdds`: the transport real agents use.
 //!
 //! Two DDS domain participants per agent (one for its writers, one for its readers), one non-keyed topic per
-//! [`Channel`] named `{prefix}_{channel}` (plus `{prefix}_updates_be` with best-effort updates, below), every writer
-//! and reader RELIABLE + KEEP_ALL + VOLATILE with **explicit
+//! [`Channel`] named `{prefix}_{channel}` (plus `{prefix}_updates_be` with best-effort updates, below), every reader
+//! RELIABLE + KEEP_ALL + VOLATILE and every writer RELIABLE + KEEP_LAST + VOLATILE, all with **explicit
 //! [`ResourceLimits`] (`rustdds` otherwise keeps only 64 samples per reader)**. A sample travels as a CDR
 //! `sequence<octet>` (4-byte length, then the bytes), so any DDS implementation can read it with a one-field IDL
 //! type.
+//!
+//! **Memory.** A keep-all writer of `rustdds` 0.15 keeps every sample it wrote, acknowledged or not, up to
+//! [`RtpsConfig::max_samples`]; a keep-last writer still keeps every sample a matched reader has not acknowledged,
+//! and its send window still comes from `max_samples`, but drops acknowledged ones beyond its depth every 6 s. So the
+//! writers are keep-last (depth 1; 1,024 for the best-effort writer, whose samples are never acknowledged). A reader's
+//! topic cache is another matter: `rustdds` 0.15 keeps the last `max_samples` samples a reader received whether or
+//! not they were taken, and evicts by count alone, so a stream of large samples costs each receiving process up to
+//! `max_samples` times the sample's size (an agent receiving 360,960-byte frames at 50 Hz grew by 17.5 MB/s, the
+//! stream's rate; so does a sending agent, through its own reader). Lowering `max_samples` bounds it, at the price of
+//! samples evicted before they are taken in a burst longer than that (agents repair those by anti-entropy).
 //!
 //! A receiving thread waits on the readers with `mio` and moves samples into a **bounded inbox**; when the inbox is
 //! full it stops taking, the readers' caches fill, and the reliable protocol pushes back on the writers. Samples

@@ -175,6 +175,25 @@ pub fn qos(config: &RtpsConfig) -> QosPolicies {
     qos_with(config, Reliability::Reliable { max_blocking_time: config.max_blocking.into() })
 }
 
+/// Samples a writer keeps beyond those some matched reliable reader has not acknowledged: none of a reliable
+/// writer's ([`writer_qos`]).
+pub(super) const RELIABLE_WRITER_DEPTH: i32 = 1;
+/// Samples a best-effort writer keeps awaiting transmission, newest first ([`writer_qos`]): a burst this long of
+/// small updates queued behind a congested socket loses its oldest, which agents repair.
+pub(super) const BEST_EFFORT_WRITER_DEPTH: i32 = 1024;
+
+/// A writer's QoS: `qos` (of its topic) with a keep-last history of `depth`.
+///
+/// Under keep-all, `rustdds` 0.15 keeps every sample a writer wrote, acknowledged or not, up to `max_samples` (100,000
+/// by default): an agent streaming 360,960-byte frames over RTPS grew by twice the stream's rate (the writer's send
+/// buffer, plus its own reader's topic cache), about 1 GB after 1,500 frames. Under keep-last it still never drops a
+/// sample some matched reliable reader has not acknowledged, and its send window still comes from `max_samples`, not
+/// from the depth; acknowledged samples beyond `depth` go at its periodic cleaning (every 6 s). A best-effort writer
+/// is never acknowledged, so there `depth` caps the samples awaiting transmission, newest first.
+pub(super) fn writer_qos(qos: &QosPolicies, depth: i32) -> QosPolicies {
+    qos.modify_by(&QosPolicyBuilder::new().history(History::KeepLast { depth }).build())
+}
+
 /// [`qos`] with another reliability (the best-effort updates topic).
 pub(super) fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPolicies {
     QosPolicyBuilder::new()
@@ -187,4 +206,25 @@ pub(super) fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPoli
             max_samples_per_instance: config.max_samples,
         })
         .build()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn readers_keep_all_and_writers_keep_last_with_the_same_limits_and_reliability() {
+        let config = RtpsConfig { max_samples: 777, ..RtpsConfig::default() };
+        let read = qos(&config);
+        let written = writer_qos(&read, RELIABLE_WRITER_DEPTH);
+        assert_eq!(read.history(), Some(History::KeepAll));
+        assert_eq!(written.history(), Some(History::KeepLast { depth: 1 }));
+        let limits = ResourceLimits { max_samples: 777, max_instances: 1, max_samples_per_instance: 777 };
+        assert_eq!((read.resource_limits(), written.resource_limits()), (Some(limits), Some(limits)));
+        assert_eq!(read.reliability(), written.reliability());
+        assert!(written.is_reliable());
+        let best_effort = writer_qos(&qos_with(&config, Reliability::BestEffort), BEST_EFFORT_WRITER_DEPTH);
+        assert_eq!(best_effort.history(), Some(History::KeepLast { depth: 1024 }));
+        assert!(!best_effort.is_reliable());
+    }
 }
