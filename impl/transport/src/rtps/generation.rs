@@ -99,7 +99,7 @@ impl Generation {
             let writer = if config.read_only && channel != Channel::Requests {
                 None
             } else {
-                let writer = writer(&written, &name, writer_qos(&qos, RELIABLE_WRITER_DEPTH))?;
+                let writer = writer(&written, &name, writer_qos(&qos, RELIABLE_WRITER_DEPTH, config.max_samples))?;
                 endpoints.push((channel, Some(writer.guid()), reader.guid()));
                 Some(writer)
             };
@@ -119,7 +119,8 @@ impl Generation {
             let writer = match best_effort_max_bytes(config) {
                 None => None,
                 Some(_) => {
-                    let writer = writer(&written, &name, writer_qos(&qos, BEST_EFFORT_WRITER_DEPTH))?;
+                    let writer =
+                        writer(&written, &name, writer_qos(&qos, BEST_EFFORT_WRITER_DEPTH, config.max_samples))?;
                     endpoints.push((Channel::Updates, Some(writer.guid()), reader.guid()));
                     Some(writer)
                 }

@@ -64,8 +64,14 @@ pub struct RtpsConfig {
     pub domain_id: u16,
     /// Prefix of the topic names, so that several graphs can share a domain.
     pub topic_prefix: String,
-    /// `ResourceLimits::max_samples` of every reader and writer.
+    /// `ResourceLimits::max_samples` of every writer: its send window, the samples some matched reliable reader has
+    /// not acknowledged before a write blocks (for [`RtpsConfig::max_blocking`], then fails).
     pub max_samples: i32,
+    /// `ResourceLimits::max_samples` of every reader and topic: the samples a reader's cache keeps. `rustdds` 0.15
+    /// keeps that many of the last samples received, taken or not, and at the limit evicts the oldest, taken or not
+    /// (see the module documentation, "Memory"): a receiving process holds up to this many times a stream's sample
+    /// size, and a burst of more than this many samples before the receiving thread takes them loses the oldest.
+    pub reader_cache_samples: i32,
     /// Samples the inbox holds before the receiving thread stops taking from the readers.
     pub inbox_capacity: usize,
     /// Largest sample accepted for publishing.
@@ -145,6 +151,7 @@ impl Default for RtpsConfig {
             domain_id: 0,
             topic_prefix: "dsr".into(),
             max_samples: 100_000,
+            reader_cache_samples: 1024,
             inbox_capacity: 65_536,
             max_sample_bytes: 256 << 20,
             large_sample_bytes: 64 << 10,
@@ -182,7 +189,7 @@ pub(super) const RELIABLE_WRITER_DEPTH: i32 = 1;
 /// small updates queued behind a congested socket loses its oldest, which agents repair.
 pub(super) const BEST_EFFORT_WRITER_DEPTH: i32 = 1024;
 
-/// A writer's QoS: `qos` (of its topic) with a keep-last history of `depth`.
+/// A writer's QoS: `qos` (of its topic) with a keep-last history of `depth` and the send window of `max_samples`.
 ///
 /// Under keep-all, `rustdds` 0.15 keeps every sample a writer wrote, acknowledged or not, up to `max_samples` (100,000
 /// by default): an agent streaming 360,960-byte frames over RTPS grew by twice the stream's rate (the writer's send
@@ -190,8 +197,15 @@ pub(super) const BEST_EFFORT_WRITER_DEPTH: i32 = 1024;
 /// sample some matched reliable reader has not acknowledged, and its send window still comes from `max_samples`, not
 /// from the depth; acknowledged samples beyond `depth` go at its periodic cleaning (every 6 s). A best-effort writer
 /// is never acknowledged, so there `depth` caps the samples awaiting transmission, newest first.
-pub(super) fn writer_qos(qos: &QosPolicies, depth: i32) -> QosPolicies {
-    qos.modify_by(&QosPolicyBuilder::new().history(History::KeepLast { depth }).build())
+pub(super) fn writer_qos(qos: &QosPolicies, depth: i32, max_samples: i32) -> QosPolicies {
+    qos.modify_by(
+        &QosPolicyBuilder::new().history(History::KeepLast { depth }).resource_limits(limits(max_samples)).build(),
+    )
+}
+
+/// Resource limits of `max_samples` samples of the one instance of a topic without keys.
+fn limits(max_samples: i32) -> ResourceLimits {
+    ResourceLimits { max_samples, max_instances: 1, max_samples_per_instance: max_samples }
 }
 
 /// [`qos`] with another reliability (the best-effort updates topic).
@@ -200,11 +214,7 @@ pub(super) fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPoli
         .reliability(reliability)
         .history(History::KeepAll)
         .durability(Durability::Volatile)
-        .resource_limits(ResourceLimits {
-            max_samples: config.max_samples,
-            max_instances: 1,
-            max_samples_per_instance: config.max_samples,
-        })
+        .resource_limits(limits(config.reader_cache_samples))
         .build()
 }
 
@@ -213,17 +223,18 @@ mod tests {
     use super::*;
 
     #[test]
-    fn readers_keep_all_and_writers_keep_last_with_the_same_limits_and_reliability() {
-        let config = RtpsConfig { max_samples: 777, ..RtpsConfig::default() };
+    fn readers_keep_all_of_their_cache_and_writers_keep_last_with_their_window_and_the_same_reliability() {
+        let config = RtpsConfig { max_samples: 777, reader_cache_samples: 55, ..RtpsConfig::default() };
         let read = qos(&config);
-        let written = writer_qos(&read, RELIABLE_WRITER_DEPTH);
+        let written = writer_qos(&read, RELIABLE_WRITER_DEPTH, config.max_samples);
         assert_eq!(read.history(), Some(History::KeepAll));
         assert_eq!(written.history(), Some(History::KeepLast { depth: 1 }));
-        let limits = ResourceLimits { max_samples: 777, max_instances: 1, max_samples_per_instance: 777 };
-        assert_eq!((read.resource_limits(), written.resource_limits()), (Some(limits), Some(limits)));
+        let cache = ResourceLimits { max_samples: 55, max_instances: 1, max_samples_per_instance: 55 };
+        let window = ResourceLimits { max_samples: 777, max_instances: 1, max_samples_per_instance: 777 };
+        assert_eq!((read.resource_limits(), written.resource_limits()), (Some(cache), Some(window)));
         assert_eq!(read.reliability(), written.reliability());
         assert!(written.is_reliable());
-        let best_effort = writer_qos(&qos_with(&config, Reliability::BestEffort), BEST_EFFORT_WRITER_DEPTH);
+        let best_effort = writer_qos(&qos_with(&config, Reliability::BestEffort), BEST_EFFORT_WRITER_DEPTH, 777);
         assert_eq!(best_effort.history(), Some(History::KeepLast { depth: 1024 }));
         assert!(!best_effort.is_reliable());
     }
