@@ -22,8 +22,10 @@
 //! a 256 one, 109 of a 64 one); agents repair such losses by anti-entropy.
 //!
 //! A receiving thread waits on the readers with `mio` and moves samples into a **bounded inbox**; when the inbox is
-//! full it stops taking, the readers' caches fill, and the reliable protocol pushes back on the writers. Samples
-//! this transport wrote itself are skipped.
+//! full it stops taking, and the readers' caches fill. They do not push back on the writers: a `rustdds` reader
+//! acknowledges a sample when it is in its cache, and past [`RtpsConfig::reader_cache_samples`] the cache evicts
+//! its oldest, taken or not ("Memory", below), which agents repair by anti-entropy. Samples this transport wrote
+//! itself are skipped.
 //!
 //! **The readers live in a second participant** (by default, see [`RtpsConfig::separate_reader_participant`]), so a
 //! writer never has a reader of its own participant. In `rustdds` 0.15 a same-participant reader keeps the writer's
