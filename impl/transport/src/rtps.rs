@@ -18,8 +18,9 @@
 //! rate, and so did the sending agent, through its own reader). So readers and their topics have a cache of their
 //! own size, [`RtpsConfig::reader_cache_samples`] (1,024: 370 MB of 360,960-byte frames, 4 GiB of 4 MiB ones). The
 //! receiving thread takes samples as they come, so only a burst of more than that many samples before it takes them
-//! loses any, the oldest (on this 2-core VM, 20,000 small samples written at once: none lost of a 1,024 cache, 10–31 of
-//! a 256 one, 109 of a 64 one); agents repair such losses by anti-entropy.
+//! loses any, the oldest (on the project's 2-core VM, 20,000 small samples written at once: none lost of a 1,024
+//! cache in one run, 31 and 10 of a 256 one in two, 109 of a 64 one in one); agents repair such losses by
+//! anti-entropy.
 //!
 //! A receiving thread waits on the readers with `mio` and moves samples into a **bounded inbox**; when the inbox is
 //! full it stops taking, and the readers' caches fill. They do not push back on the writers: a `rustdds` reader

@@ -10,10 +10,7 @@ use rustdds::{DomainParticipant, DomainParticipantBuilder, QosPolicies, RTPSEnti
 use super::discovery::{DiscoveryState, DiscoveryWatch, Prefix, endpoint_of, prefix_of};
 use super::engine::{EngineThread, EngineWatch};
 use super::payload::{OctetsAdapter, Payload, Reader, Writer};
-use super::settings::{
-    BEST_EFFORT_WRITER_DEPTH, RELIABLE_WRITER_DEPTH, RtpsConfig, best_effort_max_bytes, qos, qos_with,
-    routable_ipv4_addresses, writer_qos,
-};
+use super::settings::{RtpsConfig, best_effort_max_bytes, qos, qos_with, routable_ipv4_addresses, writer_qos};
 use crate::{Channel, EndpointId, TransportError};
 
 /// The participants of one generation of DDS entities.
@@ -81,9 +78,10 @@ impl Generation {
             };
             Ok((written, read))
         };
-        let writer = |topic: &Topic, name: &str, qos: QosPolicies| {
+        // A writer's QoS is its topic's with a keep-last history and its own send window (`writer_qos`).
+        let writer = |topic: &Topic, name: &str, qos: &QosPolicies| {
             publisher
-                .create_datawriter_no_key::<Payload, OctetsAdapter>(topic, Some(qos))
+                .create_datawriter_no_key::<Payload, OctetsAdapter>(topic, Some(writer_qos(config, qos)))
                 .map_err(setup(format!("writer of {name}")))
         };
         let reader = |topic: &Topic, name: &str, qos: &QosPolicies| {
@@ -99,7 +97,7 @@ impl Generation {
             let writer = if config.read_only && channel != Channel::Requests {
                 None
             } else {
-                let writer = writer(&written, &name, writer_qos(&qos, RELIABLE_WRITER_DEPTH, config.max_samples))?;
+                let writer = writer(&written, &name, &qos)?;
                 endpoints.push((channel, Some(writer.guid()), reader.guid()));
                 Some(writer)
             };
@@ -119,8 +117,7 @@ impl Generation {
             let writer = match best_effort_max_bytes(config) {
                 None => None,
                 Some(_) => {
-                    let writer =
-                        writer(&written, &name, writer_qos(&qos, BEST_EFFORT_WRITER_DEPTH, config.max_samples))?;
+                    let writer = writer(&written, &name, &qos)?;
                     endpoints.push((Channel::Updates, Some(writer.guid()), reader.guid()));
                     Some(writer)
                 }

@@ -177,19 +177,23 @@ pub(super) fn best_effort_max_bytes(config: &RtpsConfig) -> Option<usize> {
     }
 }
 
-/// The QoS of every reader and writer: reliable, keep-all, volatile, explicit resource limits.
+/// The QoS of every topic and reader: reliable, keep-all, volatile, a cache of
+/// [`RtpsConfig::reader_cache_samples`] (a writer's is made from it, with a keep-last history and its send window).
 pub fn qos(config: &RtpsConfig) -> QosPolicies {
     qos_with(config, Reliability::Reliable { max_blocking_time: config.max_blocking.into() })
 }
 
-/// Samples a writer keeps beyond those some matched reliable reader has not acknowledged: none of a reliable
-/// writer's ([`writer_qos`]).
-pub(super) const RELIABLE_WRITER_DEPTH: i32 = 1;
-/// Samples a best-effort writer keeps awaiting transmission, newest first ([`writer_qos`]): a burst this long of
-/// small updates queued behind a congested socket loses its oldest, which agents repair.
-pub(super) const BEST_EFFORT_WRITER_DEPTH: i32 = 1024;
+/// The keep-last depth of a reliable writer: besides the samples some matched reader has not acknowledged, it keeps
+/// the last one ([`writer_qos`]).
+const RELIABLE_WRITER_DEPTH: i32 = 1;
+/// The keep-last depth of a best-effort writer: the samples it keeps awaiting transmission, newest first
+/// ([`writer_qos`]); a longer burst of small updates queued behind a congested socket loses its oldest, which agents
+/// repair.
+const BEST_EFFORT_WRITER_DEPTH: i32 = 1024;
 
-/// A writer's QoS: `qos` (of its topic) with a keep-last history of `depth` and the send window of `max_samples`.
+/// A writer's QoS: `topic_qos` (its topic's, [`qos`] or [`qos_with`]) with a keep-last history (of
+/// [`RELIABLE_WRITER_DEPTH`] or [`BEST_EFFORT_WRITER_DEPTH`], by its reliability) and the send window of
+/// [`RtpsConfig::max_samples`].
 ///
 /// Under keep-all, `rustdds` 0.15 keeps every sample a writer wrote, acknowledged or not, up to `max_samples` (100,000
 /// by default): an agent streaming 360,960-byte frames over RTPS grew by twice the stream's rate (the writer's send
@@ -197,10 +201,11 @@ pub(super) const BEST_EFFORT_WRITER_DEPTH: i32 = 1024;
 /// sample some matched reliable reader has not acknowledged, and its send window still comes from `max_samples`, not
 /// from the depth; acknowledged samples beyond `depth` go at its periodic cleaning (every 6 s). A best-effort writer
 /// is never acknowledged, so there `depth` caps the samples awaiting transmission, newest first.
-pub(super) fn writer_qos(qos: &QosPolicies, depth: i32, max_samples: i32) -> QosPolicies {
-    qos.modify_by(
-        &QosPolicyBuilder::new().history(History::KeepLast { depth }).resource_limits(limits(max_samples)).build(),
-    )
+pub(super) fn writer_qos(config: &RtpsConfig, topic_qos: &QosPolicies) -> QosPolicies {
+    let depth = if topic_qos.is_reliable() { RELIABLE_WRITER_DEPTH } else { BEST_EFFORT_WRITER_DEPTH };
+    let writer =
+        QosPolicyBuilder::new().history(History::KeepLast { depth }).resource_limits(limits(config.max_samples));
+    topic_qos.modify_by(&writer.build())
 }
 
 /// Resource limits of `max_samples` samples of the one instance of a topic without keys.
@@ -226,7 +231,7 @@ mod tests {
     fn readers_keep_all_of_their_cache_and_writers_keep_last_with_their_window_and_the_same_reliability() {
         let config = RtpsConfig { max_samples: 777, reader_cache_samples: 55, ..RtpsConfig::default() };
         let read = qos(&config);
-        let written = writer_qos(&read, RELIABLE_WRITER_DEPTH, config.max_samples);
+        let written = writer_qos(&config, &read);
         assert_eq!(read.history(), Some(History::KeepAll));
         assert_eq!(written.history(), Some(History::KeepLast { depth: 1 }));
         let cache = ResourceLimits { max_samples: 55, max_instances: 1, max_samples_per_instance: 55 };
@@ -234,8 +239,9 @@ mod tests {
         assert_eq!((read.resource_limits(), written.resource_limits()), (Some(cache), Some(window)));
         assert_eq!(read.reliability(), written.reliability());
         assert!(written.is_reliable());
-        let best_effort = writer_qos(&qos_with(&config, Reliability::BestEffort), BEST_EFFORT_WRITER_DEPTH, 777);
+        let best_effort = writer_qos(&config, &qos_with(&config, Reliability::BestEffort));
         assert_eq!(best_effort.history(), Some(History::KeepLast { depth: 1024 }));
         assert!(!best_effort.is_reliable());
+        assert_eq!(best_effort.resource_limits(), Some(window));
     }
 }
