@@ -115,6 +115,6 @@ fn receivers_that_never_answer_fail_the_run_after_the_last_start_and_are_named()
     config.probe_window = Duration::from_millis(300);
     let error = format!("{:#}", run(&workload, &config).unwrap_err());
     assert!(error.contains("0 of 1 receiver processes answered") && error.contains("replicas [2]"), "{error}");
-    assert_eq!(starts(&dir), measure::process::START_ATTEMPTS as usize);
+    assert_eq!(starts(&dir), measure::restart::MAX_STARTS as usize);
     let _ = std::fs::remove_dir_all(&dir);
 }

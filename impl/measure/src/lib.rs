@@ -10,7 +10,7 @@
 //! 1. **Plain data** — [`spec`] (what to run: the experiment file, the runners' configurations, [`Link`]) and
 //!    [`results`] (what was measured: [`RunResult`], [`results::WriteTimeline`],
 //!    [`results::Results`], …), beside the leaf helpers [`units`] (the one place durations and bytes become
-//!    display numbers), [`clock`], [`latency`] and [`provenance`].
+//!    display numbers), [`clock`], [`latency`], [`provenance`] and [`restart`] (starting receivers again).
 //! 2. **Runners** that produce results: [`run`] (in-process runs, their source side in `source` and receiving
 //!    side in `receiving`, shared with [`process`]: receivers as separate processes), [`partition`],
 //!    [`replay_rtps`] (a log replayed over RTPS into `cortex agent` processes, its bridge agent playing the log
@@ -38,6 +38,7 @@ mod receiving;
 pub mod record;
 pub mod replay_rtps;
 pub mod report;
+pub mod restart;
 pub mod results;
 pub mod roles;
 pub mod run;

@@ -9,10 +9,9 @@
 //! 1. the source starts the N−1 receiver processes ([`RunConfig::receiver_program`]);
 //! 2. it publishes probes on `Updates` until every receiver has answered one on `Sync` (RTPS discovery; a
 //!    reliable volatile reader matched late would miss the first writes). If some receiver has not answered
-//!    within [`RunConfig::probe_window`] ([`PROBE_WINDOW`](crate::spec::PROBE_WINDOW) by default), every receiver is stopped and the run
-//!    starts again with new processes, a new participant and new topics, at most [`START_ATTEMPTS`] times in
-//!    all; the result counts the starts ([`RunResult::start_attempts`]). Nothing is measured before every
-//!    receiver has answered, so a start that did not get that far leaves no trace in the figures;
+//!    within [`RunConfig::probe_window`] ([`PROBE_WINDOW`](crate::spec::PROBE_WINDOW) by default), every
+//!    receiver is stopped and the run starts again with new processes, a new participant and new topics
+//!    ([`crate::restart`]); the result counts the starts ([`RunResult::start_attempts`]);
 //! 3. it publishes the workload at its due times; a receiver stamps each write when decoded and applied, and exits
 //!    with its report once it has applied every write;
 //! 4. the source waits for the receivers to exit, at most [`RunConfig::settle_timeout`] after the last write; then
@@ -38,6 +37,7 @@ use transport::{Channel, Clock, Transport, TransportStats};
 
 use crate::clock::MonoClock;
 use crate::receiving::{PROBE, Received, ReceiverOutcome, Receiving};
+use crate::restart::with_restarts;
 use crate::results::{AgentCost, RunResult};
 use crate::source::{self, SourceSide};
 use crate::spec::RunConfig;
@@ -50,11 +50,6 @@ const PROBE_ANSWER: u64 = u64::MAX - 1;
 const STOP: u64 = u64::MAX - 2;
 /// How long a receiver waits for its first probe before giving up.
 const FIRST_PROBE_WAIT: Duration = Duration::from_secs(60);
-/// Starts of a run's receivers before a run whose receivers do not all answer the probes fails. On the 2-core
-/// machine, two of about sixty runs of 16 processes (2026-11-28) had one receiver whose answers never reached the
-/// source within [`PROBE_WINDOW`](crate::spec::PROBE_WINDOW); in the one looked at, the source's updates writer had matched every receiver's
-/// reader: a discovery between two rustdds participants that did not complete.
-pub const START_ATTEMPTS: u32 = 3;
 
 /// A start of a run's receivers in which some did not answer the source's probes within [`RunConfig::probe_window`].
 #[derive(Debug, thiserror::Error)]
@@ -256,31 +251,17 @@ fn kill_all(receivers: &mut [Receiver]) {
 }
 
 /// The source side of a [`Link::Processes`](crate::run::Link::Processes) run (see the module documentation):
-/// starts the receivers again, up to [`START_ATTEMPTS`] times in all, while some do not answer the probes.
+/// starts the receivers again ([`with_restarts`]) while some do not answer the probes.
 pub(crate) fn run(workload: &Workload, config: &RunConfig, domain_id: u16) -> anyhow::Result<RunResult> {
     let program = config
         .receiver_program
         .as_deref()
         .context("a run with receiver processes needs the receiver program (RunConfig::receiver_program)")?;
-    let mut attempt = 1;
-    loop {
-        match start(workload, config, domain_id, program) {
-            Ok(mut result) => {
-                result.start_attempts = attempt;
-                return Ok(result);
-            }
-            Err(error) if attempt < START_ATTEMPTS && error.is::<ProbesUnanswered>() => {
-                attempt += 1;
-                tracing::warn!(
-                    "{} with {} agents over rtps-processes: {error}; stopped them all and starting the run again \
-                     (start {attempt} of at most {START_ATTEMPTS})",
-                    workload.name,
-                    config.agents
-                );
-            }
-            Err(error) => return Err(error),
-        }
-    }
+    let what = format!("{} with {} agents over rtps-processes", workload.name, config.agents);
+    let unanswered = |error: &anyhow::Error| error.is::<ProbesUnanswered>();
+    let (mut result, starts) = with_restarts(&what, unanswered, |_| start(workload, config, domain_id, program))?;
+    result.start_attempts = starts;
+    Ok(result)
 }
 
 /// One start of a run's receivers: the run itself if they all answer the probes.

@@ -24,7 +24,7 @@
 //!   ([`may_write_graph`]) — but cannot create a writer of updates or answers, and nothing it publishes can
 //!   change a graph. A participant named in `--expired` gets an identity certificate and a grant that ended a day
 //!   ago.
-//! - Revocation ([`mod@revoke`], `revoke.rs`): revocation lists are not offered, since `rustdds` 0.15 does not read them
+//! - Revocation ([`mod@revoke`]): revocation lists are not offered, since `rustdds` 0.15 does not read them
 //!   (`DomainParticipantSecurityConfigFiles::certificate_revocation_list` is "not yet implemented"). Instead the CA
 //!   is rotated: a new CA re-signs the governance and re-issues every other participant (same subject, validity and
 //!   permissions document), the old CA is kept in `DIR/ca/retired-N/`, and the revoked participants' directories

@@ -41,6 +41,7 @@ use super::helper::Helper;
 use super::{Counting, growth, loadavg};
 use crate::latency::{self, Percentiles};
 use crate::netns::LoopbackCounters;
+use crate::restart::with_restarts;
 use crate::results::{PayloadCell, PayloadPathsResult};
 use crate::spec::{PayloadPath, PayloadPathsExperiment};
 use crate::usage::process_cpu_ns_of;
@@ -51,9 +52,6 @@ const QUIET: Duration = Duration::from_millis(1_500);
 const SETTLE_LIMIT: Duration = Duration::from_secs(10);
 /// How long the receivers have to report after the run.
 const REPORT_TIMEOUT: Duration = Duration::from_secs(30);
-/// How many times a session's receivers are started at most: a session whose receivers do not all answer a probe
-/// (`numbering::ProbesUnanswered`) stops them and starts again with new processes on new services or topics.
-pub const SESSION_STARTS: u32 = 3;
 
 /// What an agent receiver process prints when it stops (one JSON line).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -69,7 +67,8 @@ pub struct ReceiverReport {
 ///
 /// # Errors
 /// An experiment that makes no cell ([`PayloadPathsExperiment::validate`]), a transport or agent that cannot
-/// start, or receivers that do not all answer a probe within 30 s at any of [`SESSION_STARTS`] starts.
+/// start, or receivers that do not all answer a probe within 30 s at any of
+/// [`MAX_STARTS`](crate::restart::MAX_STARTS) starts.
 pub fn run(
     experiment: &PayloadPathsExperiment,
     domain: u16,
@@ -89,7 +88,8 @@ pub fn run(
         for &path in experiment.paths.iter().filter(|p| p.has_receivers()) {
             let before = counting.counters()?;
             let label = format!("{} to {receivers} receivers", path.label());
-            let session = with_restarts(&label, |start| match path {
+            let unanswered = |error: &anyhow::Error| error.is::<numbering::ProbesUnanswered>();
+            let session = with_restarts(&label, unanswered, |start| match path {
                 PayloadPath::Iceoryx2 => raw::session(experiment, receivers, counting, program, progress),
                 PayloadPath::Transport => lanes::session(experiment, receivers, start, counting, program, progress),
                 PayloadPath::Agents(link) => {
@@ -98,7 +98,9 @@ pub fn run(
                 }
                 PayloadPath::Memcpy => Ok(Vec::new()),
             });
-            cells.extend(session.with_context(|| label.clone())?);
+            let (mut session, starts) = session.with_context(|| label.clone())?;
+            session.iter_mut().for_each(|cell| cell.session_starts = starts);
+            cells.extend(session);
             if growth(counting.counters()?, before).is_some_and(|g| g.tx_bytes > 0) {
                 settle(counting)?;
             }
@@ -106,34 +108,6 @@ pub fn run(
     }
     let netns = *counting == Counting::Socket;
     Ok(PayloadPathsResult::new(experiment.clone(), netns, loadavg(), cells))
-}
-
-/// Runs a session (`session(start)`, start 1, 2, ...) until its receivers all answer the probes, at most
-/// [`SESSION_STARTS`] times; each cell counts the starts of its session ([`PayloadCell::session_starts`]).
-///
-/// # Errors
-/// The session's error: at once if it is not [`numbering::ProbesUnanswered`], else at the last start.
-fn with_restarts(
-    label: &str,
-    mut session: impl FnMut(u32) -> anyhow::Result<Vec<PayloadCell>>,
-) -> anyhow::Result<Vec<PayloadCell>> {
-    let mut start = 1;
-    loop {
-        match session(start) {
-            Ok(mut cells) => {
-                cells.iter_mut().for_each(|cell| cell.session_starts = start);
-                return Ok(cells);
-            }
-            Err(error) if start < SESSION_STARTS && error.is::<numbering::ProbesUnanswered>() => {
-                start += 1;
-                tracing::warn!(
-                    "payload paths, {label}: {error}; stopped its receivers and starting them again (start {start} \
-                     of at most {SESSION_STARTS})"
-                );
-            }
-            Err(error) => return Err(error),
-        }
-    }
 }
 
 /// The receiver process of `path` (the helper of `bench payload-receiver`): receiver `index` on the services of
@@ -312,41 +286,6 @@ mod tests {
         assert_eq!(seen, [0, 1, 2, 3]);
         let error = paced(4, 1e6, |i| if i == 2 { anyhow::bail!("refused") } else { Ok(()) }).unwrap_err();
         assert!(error.to_string().contains("refused"));
-    }
-
-    fn unanswered() -> anyhow::Error {
-        numbering::ProbesUnanswered { size_bytes: 16, window: Duration::from_secs(30) }.into()
-    }
-
-    #[test]
-    fn a_session_whose_probes_go_unanswered_starts_again_and_its_cells_count_the_starts() {
-        let mut starts = Vec::new();
-        let cells = with_restarts("agents over rtps to 8 receivers", |start| {
-            starts.push(start);
-            if start < 2 { Err(unanswered().context("probing")) } else { Ok(vec![memcpy_cell(16, 2); 2]) }
-        })
-        .unwrap();
-        assert_eq!(starts, [1, 2]);
-        assert!(cells.iter().all(|cell| cell.session_starts == 2));
-    }
-
-    #[test]
-    fn a_session_stops_at_the_last_start_and_other_errors_are_not_retried() {
-        let mut starts = 0;
-        let error = with_restarts("label", |_| {
-            starts += 1;
-            Err(unanswered())
-        })
-        .unwrap_err();
-        assert_eq!(starts, SESSION_STARTS);
-        assert!(error.to_string().contains("did not all answer a probe of 16 B within 30s"), "{error}");
-        starts = 0;
-        let error = with_restarts("label", |_| {
-            starts += 1;
-            anyhow::bail!("the writing agent did not start")
-        })
-        .unwrap_err();
-        assert_eq!((starts, error.to_string().as_str()), (1, "the writing agent did not start"));
     }
 
     #[test]

@@ -29,9 +29,9 @@ pub fn summary_of(result: &RunResult) -> RunSummary {
     }
 }
 
-/// Records a finished run from its [`crate::results::WriteTimeline`]: bandwidth windows of its publications, a latency message per
-/// (write, receiver) that was applied, a convergence window per write that reached every receiver, all in log-time
-/// order, then the summary.
+/// Records a finished run from its [`crate::results::WriteTimeline`]: bandwidth windows of its publications, a
+/// latency message per (write, receiver) that was applied, a convergence window per write that reached every
+/// receiver, all in log-time order, then the summary.
 ///
 /// # Errors
 /// The output cannot be written.

@@ -49,7 +49,7 @@ pub struct PayloadCell {
     /// This cell's figures over raw iceoryx2's for the same size and receivers, when both were measured.
     pub to_iceoryx2: Option<PathRatios>,
     /// How many times this cell's receivers were started: 1, or more when some did not answer the probes and its
-    /// session started again with new processes (at most `measure::bench::payload::SESSION_STARTS`). In
+    /// session started again with new processes (at most [`crate::restart::MAX_STARTS`]). In
     /// `results.json` only when above 1.
     #[serde(skip_serializing_if = "super::run::is_first")]
     pub session_starts: u32,

@@ -95,7 +95,7 @@ pub struct RunResult {
     pub agent_costs: Vec<AgentCost>,
     /// How many times the run's receivers were started: 1, or for `rtps-processes` more when some receiver did
     /// not answer the source's probes and the run started again with new processes (at most
-    /// `measure::process::START_ATTEMPTS`). In `results.json` only when above 1.
+    /// [`crate::restart::MAX_STARTS`]). In `results.json` only when above 1.
     #[serde(skip_serializing_if = "is_first")]
     pub start_attempts: u32,
     /// Every latency, for merging runs (not serialised; the percentiles and CDF points are).

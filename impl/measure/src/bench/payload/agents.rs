@@ -73,7 +73,8 @@ pub(super) struct Session {
     pub(super) receivers: u32,
     /// DDS domain of agents over RTPS.
     pub(super) domain: u16,
-    /// 1 for the session's first start, 2 for the next ([`super::with_restarts`]): each start has topics of its own.
+    /// 1 for the session's first start, 2 for the next ([`crate::restart::with_restarts`]): each start has topics
+    /// of its own.
     pub(super) start: u32,
 }
 

@@ -30,7 +30,7 @@ pub(super) const STOP: u64 = u64::MAX;
 /// Probes of one size go out this far apart until every receiver has answered one.
 const PROBE_INTERVAL: Duration = Duration::from_millis(200);
 /// How long the receivers have to answer a probe (for the first size, discovery and join included) before the
-/// session gives up and starts again with new receivers ([`super::SESSION_STARTS`]).
+/// session gives up and starts again with new receivers ([`crate::restart::MAX_STARTS`]).
 const FIRST_ANSWER_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long the receivers have to answer the last sample of a size before its window closes anyway.
 pub(super) const LAST_ANSWER_TIMEOUT: Duration = Duration::from_secs(20);
@@ -38,7 +38,7 @@ pub(super) const LAST_ANSWER_TIMEOUT: Duration = Duration::from_secs(20);
 pub(super) const WRITER_SILENT: Duration = Duration::from_secs(60);
 
 /// The receivers of a session did not all answer a probe in time (as when an RTPS discovery between two
-/// participants never completes): the session starts again with new receivers ([`super::SESSION_STARTS`]).
+/// participants never completes): the session starts again with new receivers ([`crate::restart::MAX_STARTS`]).
 #[derive(Debug, thiserror::Error)]
 #[error("the receivers did not all answer a probe of {size_bytes} B within {window:?}")]
 pub(super) struct ProbesUnanswered {
