@@ -120,6 +120,7 @@
 mod discovery;
 mod engine;
 mod generation;
+mod large;
 mod payload;
 mod receive;
 mod settings;
@@ -133,7 +134,7 @@ use bytes::Bytes;
 use crossbeam_channel::{Receiver, bounded};
 #[cfg(doc)]
 use rustdds::policy::ResourceLimits;
-use rustdds::{GUID, WriteOptionsBuilder};
+use rustdds::{GUID, SampleIdentity, WriteOptionsBuilder};
 
 use crate::{
     Channel, Clock, Counters, EndpointId, Sample, Sink, SystemClock, Transport, TransportError, TransportStats,
@@ -181,6 +182,8 @@ struct Shared {
     writers: Vec<Mutex<Option<Writer>>>,
     /// The best-effort updates writer and the largest sample it takes ([`UpdateDelivery::BestEffort`]).
     best_effort: Option<(Mutex<Writer>, usize)>,
+    /// The writer of large updates (see [`large`]); `None` for a read-only transport.
+    large: Mutex<Option<Writer>>,
     /// This transport's endpoint id (its publishing participant's GUID prefix, which tags its samples) and the GUID
     /// prefix of the participant holding its readers (told to peers, see [`READERS_AT`]).
     identity: Mutex<(EndpointId, Prefix)>,
@@ -215,10 +218,11 @@ impl RtpsTransport {
         let discovery = Arc::new(DiscoveryState::default());
         let generation = Generation::build(&config, multicast, &discovery)?;
         discovery.times.lock().unwrap_or_else(|p| p.into_inner()).created_ns = SystemClock.now_ns();
-        let Generation { writers, best_effort, local, reading_prefix, participants, reading } = generation;
+        let Generation { writers, best_effort, large, local, reading_prefix, participants, reading } = generation;
         let shared = Arc::new(Shared {
             writers: writers.into_iter().map(Mutex::new).collect(),
             best_effort: best_effort.zip(best_effort_max_bytes(&config)).map(|(w, max)| (Mutex::new(w), max)),
+            large: Mutex::new(large),
             identity: Mutex::new((local, reading_prefix)),
             participants: Mutex::new(participants),
         });
@@ -377,23 +381,62 @@ impl RtpsTransport {
             self.counters.sent(size, estimated_wire_bytes(size, false));
             return Ok(());
         }
+        if channel == Channel::Updates && reader.is_none() && size >= self.config.large_sample_bytes {
+            return self.write_large(bytes);
+        }
         let writer = self.shared.writers[channel.index()].lock().unwrap_or_else(|p| p.into_inner());
         let Some(writer) = writer.as_ref() else {
             return Err(TransportError::ReadOnly { channel: channel.name() });
         };
-        let deadline = Instant::now() + self.config.max_blocking * 4;
-        let payload = Payload(bytes);
-        loop {
-            let written = match reader {
-                Some(reader) => writer
-                    .write_with_options(payload.clone(), WriteOptionsBuilder::new().to_single_reader(reader).build())
-                    .map(|_| ()),
-                None => writer.write(payload.clone(), None),
+        self.write_reliable(writer, channel, Payload(bytes), reader)?;
+        self.pace(writer, size);
+        self.counters.sent(size, estimated_wire_bytes(size, true));
+        Ok(())
+    }
+
+    /// A large update: on the topic of large updates, then its marker on the updates topic (see [`large`]).
+    fn write_large(&self, bytes: Bytes) -> Result<(), TransportError> {
+        let size = bytes.len();
+        let sequence = {
+            let writer = self.shared.large.lock().unwrap_or_else(|p| p.into_inner());
+            let Some(writer) = writer.as_ref() else {
+                return Err(TransportError::ReadOnly { channel: Channel::Updates.name() });
             };
-            match written {
-                Ok(()) => break,
+            let written = self.write_reliable(writer, Channel::Updates, Payload(bytes), None)?;
+            self.pace(writer, size);
+            written.sequence_number
+        };
+        let marker = large::marker(sequence.into());
+        let marker_bytes = marker.len();
+        let writer = self.shared.writers[Channel::Updates.index()].lock().unwrap_or_else(|p| p.into_inner());
+        let Some(writer) = writer.as_ref() else {
+            return Err(TransportError::ReadOnly { channel: Channel::Updates.name() });
+        };
+        self.write_reliable(writer, Channel::Updates, Payload(marker), None)?;
+        self.counters.sent(size, estimated_wire_bytes(size, true) + estimated_wire_bytes(marker_bytes, true));
+        Ok(())
+    }
+
+    /// Writes `payload` reliably to every matched reader, or to `reader` alone (the others are told, by a GAP, that
+    /// the sequence number is not for them). A full send window is back-pressure: the write waits for
+    /// acknowledgements and tries again, for up to four times [`RtpsConfig::max_blocking`].
+    fn write_reliable(
+        &self,
+        writer: &Writer,
+        channel: Channel,
+        payload: Payload,
+        reader: Option<GUID>,
+    ) -> Result<SampleIdentity, TransportError> {
+        let deadline = Instant::now() + self.config.max_blocking * 4;
+        let options = match reader {
+            Some(reader) => WriteOptionsBuilder::new().to_single_reader(reader).build(),
+            None => WriteOptionsBuilder::new().build(),
+        };
+        loop {
+            match writer.write_with_options(payload.clone(), options.clone()) {
+                Ok(written) => return Ok(written),
                 Err(rustdds::dds::result::WriteError::WouldBlock { .. }) if Instant::now() < deadline => {
-                    // The send window is full: back-pressure. Give acknowledgements a chance, then retry.
+                    // The send window is full: give acknowledgements a chance, then retry.
                     let _ = writer.wait_for_acknowledgments(Duration::from_millis(100));
                 }
                 Err(error) => {
@@ -401,6 +444,11 @@ impl RtpsTransport {
                 }
             }
         }
+    }
+
+    /// Pacing of large samples: after every [`RtpsConfig::pace_bytes`] of them, waits (bounded) for `writer`'s
+    /// acknowledgements.
+    fn pace(&self, writer: &Writer, size: usize) {
         if size >= self.config.large_sample_bytes {
             let pending = self.unpaced_large_bytes.fetch_add(size, Ordering::Relaxed) + size;
             if pending >= self.config.pace_bytes {
@@ -408,7 +456,5 @@ impl RtpsTransport {
                 let _ = writer.wait_for_acknowledgments(self.config.max_blocking);
             }
         }
-        self.counters.sent(size, estimated_wire_bytes(size, true));
-        Ok(())
     }
 }

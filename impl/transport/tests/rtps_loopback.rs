@@ -123,6 +123,59 @@ fn best_effort_updates_carry_small_samples_unacknowledged_and_large_ones_reliabl
 }
 
 #[test]
+fn large_updates_travel_on_their_own_topic_and_arrive_in_their_writers_order() {
+    let prefix = format!("large{}", std::process::id());
+    let a = RtpsTransport::new(config(&prefix)).unwrap();
+    let b = RtpsTransport::new(config(&prefix)).unwrap();
+    // Both topics of updates matched: a large update and the small one after it got through.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    'matched: loop {
+        assert!(Instant::now() < deadline, "the updates topics did not match within 20 s");
+        a.publish(Channel::Updates, Bytes::from(vec![0xEE; 100_000])).unwrap();
+        a.publish(Channel::Updates, Bytes::from_static(b"probe")).unwrap();
+        while let Some(got) = b.recv_timeout(Duration::from_millis(200)) {
+            if got.bytes.len() == 100_000 {
+                break 'matched;
+            }
+        }
+    }
+    while b.recv_timeout(Duration::from_millis(300)).is_some() {}
+    while a.try_recv().is_some() {}
+    let before = a.stats();
+    // Small updates with a 300 kB one (hundreds of fragments, on the topic of large updates) before every fourth:
+    // without the merge, the small update written after a large one usually arrives first.
+    let sample = |i: u32| {
+        let size = if i % 4 == 0 { 300_000 } else { 16 };
+        let mut bytes = vec![(i % 251) as u8; size];
+        bytes[..4].copy_from_slice(&i.to_le_bytes());
+        Bytes::from(bytes)
+    };
+    let n = 120u32;
+    for i in 0..n {
+        a.publish(Channel::Updates, sample(i)).unwrap();
+        if i % 8 == 7 {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+    let mut received = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while received.len() < n as usize && Instant::now() < deadline {
+        if let Some(got) = b.recv_timeout(Duration::from_millis(100)) {
+            assert_eq!((got.channel, got.origin), (Channel::Updates, a.local_id()));
+            let i = u32::from_le_bytes(got.bytes[..4].try_into().unwrap());
+            assert_eq!(got.bytes, sample(i), "sample {i} arrived whole");
+            received.push(i);
+        }
+    }
+    assert_eq!(received, (0..n).collect::<Vec<_>>(), "every update, once, in the order written; no marker");
+    assert!(b.recv_timeout(Duration::from_millis(200)).is_none(), "nothing more: markers are consumed");
+    let sent = a.stats().wire_bytes_sent - before.wire_bytes_sent;
+    let marker = estimated_wire_bytes(16, true);
+    let expected = 30 * (estimated_wire_bytes(300_000, true) + marker) + 90 * estimated_wire_bytes(16, true);
+    assert_eq!(sent, expected as u64, "a large update counts its marker's bytes too");
+}
+
+#[test]
 fn a_sink_gets_samples_on_the_receiving_thread_until_it_is_cleared() {
     let prefix = format!("sink{}", std::process::id());
     let a = RtpsTransport::new(config(&prefix)).unwrap();

@@ -10,7 +10,9 @@ use rustdds::{DomainParticipant, DomainParticipantBuilder, QosPolicies, RTPSEnti
 use super::discovery::{DiscoveryState, DiscoveryWatch, Prefix, endpoint_of, prefix_of};
 use super::engine::{EngineThread, EngineWatch};
 use super::payload::{OctetsAdapter, Payload, Reader, Writer};
-use super::settings::{RtpsConfig, best_effort_max_bytes, qos, qos_with, routable_ipv4_addresses, writer_qos};
+use super::settings::{
+    RtpsConfig, best_effort_max_bytes, large_qos, qos, qos_with, routable_ipv4_addresses, writer_qos,
+};
 use crate::{Channel, EndpointId, TransportError};
 
 /// The participants of one generation of DDS entities.
@@ -27,6 +29,8 @@ pub(super) struct Generation {
     /// One writer per channel (by [`Channel::index`]); `None` for a channel a read-only transport does not write.
     pub(super) writers: Vec<Option<Writer>>,
     pub(super) best_effort: Option<Writer>,
+    /// The writer of large updates; `None` for a read-only transport.
+    pub(super) large: Option<Writer>,
     pub(super) reading: Reading,
     pub(super) local: EndpointId,
     pub(super) reading_prefix: Prefix,
@@ -36,6 +40,8 @@ pub(super) struct Generation {
 /// What the receiving thread owns of a generation.
 pub(super) struct Reading {
     pub(super) readers: Vec<(Channel, Reader)>,
+    /// The reader of large updates (see [`super::large`]).
+    pub(super) large: Reader,
     pub(super) watch: DiscoveryWatch,
     /// The endpoint id of this generation's writers: samples from it are this transport's own.
     pub(super) local: EndpointId,
@@ -125,6 +131,15 @@ impl Generation {
             readers.push((Channel::Updates, reader));
             writer
         };
+        // Large updates: a topic with a small cache of its own (see `super::large`). Its endpoints are not watched:
+        // discovery is followed on the updates topic, and no write on it is directed.
+        let (large, large_reader) = {
+            let name = format!("{}_updates_large", config.topic_prefix);
+            let qos = large_qos(config);
+            let (written, read) = topics(&name, &qos)?;
+            let writer = if config.read_only { None } else { Some(writer(&written, &name, &qos)?) };
+            (writer, reader(&read, &name, &qos)?)
+        };
         // Samples are tagged with their writer's GUID prefix: the publishing participant's.
         let local = endpoint_of(publishing.guid());
         // Discovery events of both participants: the writers' matches come from the publishing one, the readers'
@@ -137,10 +152,11 @@ impl Generation {
         Ok(Generation {
             writers,
             best_effort,
+            large,
             local,
             reading_prefix,
             participants: Participants { _publishing: publishing, _subscribing: subscribing },
-            reading: Reading { readers, watch, local, engine },
+            reading: Reading { readers, large: large_reader, watch, local, engine },
         })
     }
 }

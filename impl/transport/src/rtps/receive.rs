@@ -13,9 +13,10 @@ use rustdds::StatusEvented;
 use super::Shared;
 use super::discovery::{DiscoveryState, endpoint_of};
 use super::generation::{Generation, Participants, Reading};
-use super::payload::{Payload, Writer};
+use super::large::{self, Order};
+use super::payload::{Payload, Reader, Writer};
 use super::settings::RtpsConfig;
-use crate::{Channel, Counters, Sample, Sink};
+use crate::{Channel, Counters, EndpointId, Sample, Sink};
 
 /// How often the receiving thread checks that `rustdds`'s threads still run (a few small `/proc` reads).
 const ENGINE_CHECK_PERIOD: Duration = Duration::from_millis(500);
@@ -143,15 +144,18 @@ fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool, bell: &StopB
     if let Err(error) = bell.arm(&poll) {
         return Ended::Broken(format!("cannot create the poller's stop waker: {error}"));
     }
-    let Reading { readers, watch, local, engine } = reading;
-    for (index, (channel, reader)) in readers.iter_mut().enumerate() {
+    for (index, (channel, reader)) in reading.readers.iter_mut().enumerate() {
         if let Err(error) = poll.registry().register(reader, Token(index), Interest::READABLE) {
             return Ended::Broken(format!("cannot register the {} reader: {error}", channel.name()));
         }
     }
-    for (i, status) in watch.statuses.iter_mut().enumerate() {
+    if let Err(error) = poll.registry().register(&mut reading.large, LARGE_TOKEN, Interest::READABLE) {
+        return Ended::Broken(format!("cannot register the large updates reader: {error}"));
+    }
+    let first_status = reading.readers.len();
+    for (i, status) in reading.watch.statuses.iter_mut().enumerate() {
         if let Err(error) =
-            poll.registry().register(status.as_status_source_mio1(), Token(readers.len() + i), Interest::READABLE)
+            poll.registry().register(status.as_status_source_mio1(), Token(first_status + i), Interest::READABLE)
         {
             // Discovery times stay unknown and joiners fall back to their retry period; data still flows.
             tracing::warn!("rtps receive: cannot watch discovery events: {error}");
@@ -159,10 +163,12 @@ fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool, bell: &StopB
     }
     let mut events = Events::with_capacity(16);
     let mut next_check = Instant::now() + ENGINE_CHECK_PERIOD;
+    let mut taking = Taking { order: Order::default(), out: Vec::new() };
     while !stop.load(Ordering::Relaxed) {
-        // Sleeps until a reader or discovery has something, the transport stops (the bell) or the engine check is due.
-        let until_check = next_check.saturating_duration_since(Instant::now());
-        match poll.poll(&mut events, Some(until_check)) {
+        // Sleeps until a reader or discovery has something, the transport stops (the bell), the engine check is
+        // due or a wait for a large update ends.
+        let wake = taking.order.next_deadline().map_or(next_check, |deadline| deadline.min(next_check));
+        match poll.poll(&mut events, Some(wake.saturating_duration_since(Instant::now()))) {
             Ok(()) => {}
             Err(error) if error.kind() == std::io::ErrorKind::Interrupted => {
                 next_check = next_check.min(Instant::now() + ENGINE_CHECK_AFTER_EINTR);
@@ -175,7 +181,12 @@ fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool, bell: &StopB
         let now = Instant::now();
         if now >= next_check {
             next_check = now + ENGINE_CHECK_PERIOD;
-            if let Some(dead) = engine.iter().find(|thread| !thread.alive()) {
+            if let Some(dead) = reading.engine.iter().find(|thread| !thread.alive()) {
+                // What waits for a large update goes on: the new generation's writers are new writers.
+                taking.order.expire(Instant::now() + large::MAX_WAIT, &mut taking.out);
+                if !taking.hand_on(outlet, stop) {
+                    return Ended::Stopped;
+                }
                 return Ended::Broken(format!(
                     "rustdds thread {:?} (tid {}) has ended; rustdds 0.15 ends it on any error of its poll, e.g. \
                      EINTR when the process resumes after SIGSTOP",
@@ -183,37 +194,88 @@ fn serve(reading: &mut Reading, outlet: &Outlet, stop: &AtomicBool, bell: &StopB
                 ));
             }
         }
-        watch.drain();
-        // Take from every reader each round: a notification may have been drained by an earlier round.
-        for (channel, reader) in readers.iter() {
-            reader.drain_read_notifications();
-            loop {
-                match reader.try_take_one() {
-                    Ok(Some(change)) => {
-                        let origin = endpoint_of(change.writer_guid());
-                        if origin == *local {
-                            continue;
-                        }
-                        let Payload(bytes) = change.into_value();
-                        if *channel == Channel::Requests && watch.state.learn_reading_prefix(origin, &bytes) {
-                            continue;
-                        }
-                        if !outlet.pass(Sample { channel: *channel, origin, bytes }, stop) {
-                            return Ended::Stopped;
-                        }
-                    }
-                    Ok(None) => break,
-                    Err(error) => {
-                        // A sample rustdds could not decode (foreign type on our topic): logged and skipped.
-                        tracing::warn!("rtps receive on {}: dropped an undecodable sample: {error:?}", channel.name());
-                        outlet.counters.dropped_full();
-                        break;
-                    }
-                }
-            }
+        reading.watch.drain();
+        if !taking.take_all(reading, outlet, stop) {
+            return Ended::Stopped;
         }
     }
     Ended::Stopped
+}
+
+/// The poll token of the large updates reader.
+const LARGE_TOKEN: rustdds::mio1::Token = rustdds::mio1::Token(usize::MAX - 1);
+
+/// The receiving thread's merge of the updates and large updates topics, and what it releases.
+struct Taking {
+    order: Order,
+    out: Vec<Sample>,
+}
+
+impl Taking {
+    /// Takes what every reader has (a notification may have been drained by an earlier round), the updates
+    /// topic's before the large updates' so that a large sample finds its marker, and hands on what is in order.
+    /// `false` when the transport is stopping.
+    fn take_all(&mut self, reading: &Reading, outlet: &Outlet, stop: &AtomicBool) -> bool {
+        for (channel, reader) in &reading.readers {
+            reader.drain_read_notifications();
+            while let Some((sample, _)) = take_one(reader, *channel, reading.local, &outlet.counters) {
+                if *channel == Channel::Requests
+                    && reading.watch.state.learn_reading_prefix(sample.origin, &sample.bytes)
+                {
+                    continue;
+                }
+                match (*channel, large::marked(&sample.bytes)) {
+                    (Channel::Updates, Some(sequence)) => {
+                        self.order.marker(sample.origin, sequence, Instant::now(), &mut self.out);
+                    }
+                    (Channel::Updates, None) => self.order.update(sample, &mut self.out),
+                    _ => self.out.push(sample),
+                }
+                if !self.hand_on(outlet, stop) {
+                    return false;
+                }
+            }
+        }
+        reading.large.drain_read_notifications();
+        while let Some((sample, sequence)) = take_one(&reading.large, Channel::Updates, reading.local, &outlet.counters)
+        {
+            self.order.large(sample, sequence, Instant::now(), &mut self.out);
+            if !self.hand_on(outlet, stop) {
+                return false;
+            }
+        }
+        self.order.expire(Instant::now(), &mut self.out);
+        self.hand_on(outlet, stop)
+    }
+
+    /// Passes on what the merge released; `false` when the transport is stopping.
+    fn hand_on(&mut self, outlet: &Outlet, stop: &AtomicBool) -> bool {
+        self.out.drain(..).all(|sample| outlet.pass(sample, stop))
+    }
+}
+
+/// The next sample of `reader` another transport wrote, with its RTPS sequence number. A sample `rustdds` could not
+/// decode (a foreign type on our topic) is logged, counted and skipped; `None` when nothing is left.
+fn take_one(reader: &Reader, channel: Channel, local: EndpointId, counters: &Counters) -> Option<(Sample, i64)> {
+    loop {
+        match reader.try_take_one() {
+            Ok(Some(change)) => {
+                let origin = endpoint_of(change.writer_guid());
+                if origin == local {
+                    continue;
+                }
+                let sequence = change.sequence_number.into();
+                let Payload(bytes) = change.into_value();
+                return Some((Sample { channel, origin, bytes }, sequence));
+            }
+            Ok(None) => return None,
+            Err(error) => {
+                tracing::warn!("rtps receive on {}: dropped an undecodable sample: {error:?}", channel.name());
+                counters.dropped_full();
+                return None;
+            }
+        }
+    }
 }
 
 /// What the receiving thread needs to rebuild the transport's DDS entities.
@@ -259,7 +321,7 @@ impl Rebuild {
     /// Swaps `generation`'s writers, identity and participants in. Each lock is held only for its swap (a write in
     /// progress on an old writer finishes first; what it wrote is lost with that writer, and agents repair it).
     fn install(&mut self, generation: Generation) -> (Reading, Replaced) {
-        let Generation { writers, best_effort, local, reading_prefix, participants, reading } = generation;
+        let Generation { writers, best_effort, large, local, reading_prefix, participants, reading } = generation;
         let mut old = Vec::new();
         for (slot, writer) in self.shared.writers.iter().zip(writers) {
             old.extend(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
@@ -267,6 +329,7 @@ impl Rebuild {
         if let (Some((slot, _)), Some(writer)) = (&self.shared.best_effort, best_effort) {
             old.push(std::mem::replace(&mut *slot.lock().unwrap_or_else(|p| p.into_inner()), writer));
         }
+        old.extend(std::mem::replace(&mut *self.shared.large.lock().unwrap_or_else(|p| p.into_inner()), large));
         *self.shared.identity.lock().unwrap_or_else(|p| p.into_inner()) = (local, reading_prefix);
         // The readers the old writers matched are no address for the new ones; the new matches fill the lists.
         for known in self.discovery.readers.lock().unwrap_or_else(|p| p.into_inner()).iter_mut() {

@@ -72,11 +72,17 @@ pub struct RtpsConfig {
     /// (see the module documentation, "Memory"): a receiving process holds up to this many times a stream's sample
     /// size, and a burst of more than this many samples before the receiving thread takes them loses the oldest.
     pub reader_cache_samples: i32,
+    /// `ResourceLimits::max_samples` of the readers and topic of large updates (samples on [`Channel::Updates`] of
+    /// [`RtpsConfig::large_sample_bytes`] or more travel there, see the module documentation, "Memory"): a
+    /// receiving process holds up to this many large updates, and a burst of more than this many before the
+    /// receiving thread takes them loses the oldest.
+    pub large_cache_samples: i32,
     /// Samples the inbox holds before the receiving thread stops taking from the readers.
     pub inbox_capacity: usize,
     /// Largest sample accepted for publishing.
     pub max_sample_bytes: usize,
-    /// Samples at least this large count towards pacing.
+    /// Samples at least this large count towards pacing, and on [`Channel::Updates`] they travel on the topic of
+    /// large updates.
     pub large_sample_bytes: usize,
     /// After this many bytes of large samples, wait for acknowledgements before writing more.
     pub pace_bytes: usize,
@@ -152,6 +158,7 @@ impl Default for RtpsConfig {
             topic_prefix: "dsr".into(),
             max_samples: 100_000,
             reader_cache_samples: 1024,
+            large_cache_samples: 16,
             inbox_capacity: 65_536,
             max_sample_bytes: 256 << 20,
             large_sample_bytes: 64 << 10,
@@ -215,11 +222,21 @@ fn limits(max_samples: i32) -> ResourceLimits {
 
 /// [`qos`] with another reliability (the best-effort updates topic).
 pub(super) fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPolicies {
+    cache_qos(reliability, config.reader_cache_samples)
+}
+
+/// The QoS of the topic of large updates and its readers: [`qos`] with a cache of
+/// [`RtpsConfig::large_cache_samples`].
+pub(super) fn large_qos(config: &RtpsConfig) -> QosPolicies {
+    cache_qos(Reliability::Reliable { max_blocking_time: config.max_blocking.into() }, config.large_cache_samples)
+}
+
+fn cache_qos(reliability: Reliability, cache_samples: i32) -> QosPolicies {
     QosPolicyBuilder::new()
         .reliability(reliability)
         .history(History::KeepAll)
         .durability(Durability::Volatile)
-        .resource_limits(limits(config.reader_cache_samples))
+        .resource_limits(limits(cache_samples))
         .build()
 }
 
@@ -243,5 +260,10 @@ mod tests {
         assert_eq!(best_effort.history(), Some(History::KeepLast { depth: 1024 }));
         assert!(!best_effort.is_reliable());
         assert_eq!(best_effort.resource_limits(), Some(window));
+        let config = RtpsConfig { large_cache_samples: 9, ..config };
+        let large = ResourceLimits { max_samples: 9, max_instances: 1, max_samples_per_instance: 9 };
+        assert_eq!(large_qos(&config).resource_limits(), Some(large));
+        assert!(large_qos(&config).is_reliable());
+        assert_eq!(writer_qos(&config, &large_qos(&config)).resource_limits(), Some(window));
     }
 }
