@@ -14,7 +14,8 @@
 //!
 //! **Every queue is bounded**: a full inbox drops (in process), and the drop is counted in [`TransportStats`], or
 //! holds back the receiving thread (RTPS), whose readers' caches then evict their oldest samples past
-//! [`rtps::RtpsConfig::reader_cache_samples`], uncounted (`rustdds` does not say). **A transport never delivers an
+//! [`rtps::RtpsConfig::reader_cache_samples`] (or [`rtps::RtpsConfig::large_cache_samples`] for large updates),
+//! uncounted (`rustdds` does not say). **A transport never delivers an
 //! endpoint's own samples back to it.**
 //! Time comes from an injected [`Clock`], so the in-process bus and the fault injector are deterministic given a
 //! seed and a [`ManualClock`].

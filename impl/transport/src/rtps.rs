@@ -1,7 +1,8 @@
 //! RTPS through `rustdds`: the transport real agents use.
 //!
 //! Two DDS domain participants per agent (one for its writers, one for its readers), one non-keyed topic per
-//! [`Channel`] named `{prefix}_{channel}` (plus `{prefix}_updates_be` with best-effort updates, below), every reader
+//! [`Channel`] named `{prefix}_{channel}` (plus `{prefix}_updates_large` for large updates and `{prefix}_updates_be`
+//! with best-effort updates, below), every reader
 //! RELIABLE + KEEP_ALL + VOLATILE and every writer RELIABLE + KEEP_LAST + VOLATILE, all with **explicit
 //! [`ResourceLimits`] (`rustdds` otherwise keeps only 64 samples per reader)**. A sample travels as a CDR
 //! `sequence<octet>` (4-byte length, then the bytes), so any DDS implementation can read it with a one-field IDL
@@ -16,11 +17,16 @@
 //! window, which must outlast a peer paused for a while) a stream of large samples cost each receiving process up to
 //! 100,000 times the sample's size (an agent receiving 360,960-byte frames at 50 Hz grew by 17.5 MB/s, the stream's
 //! rate, and so did the sending agent, through its own reader). So readers and their topics have a cache of their
-//! own size, [`RtpsConfig::reader_cache_samples`] (1,024: 370 MB of 360,960-byte frames, 4 GiB of 4 MiB ones). The
-//! receiving thread takes samples as they come, so only a burst of more than that many samples before it takes them
-//! loses any, the oldest (on the project's 2-core VM, 20,000 small samples written at once: none lost of a 1,024
-//! cache in one run, 31 and 10 of a 256 one in two, 109 of a 64 one in one); agents repair such losses by
-//! anti-entropy.
+//! own size, [`RtpsConfig::reader_cache_samples`] (1,024). The receiving thread takes samples as they come, so only a
+//! burst of more than that many samples before it takes them loses any, the oldest (on the project's 2-core VM,
+//! 20,000 small samples written at once: none lost of a 1,024 cache in one run, 31 and 10 of a 256 one in two, 109 of
+//! a 64 one in one); agents repair such losses by anti-entropy. A cache of 1,024 samples of any size held 370 MB of
+//! 360,960-byte frames and would hold 4 GiB of 4 MiB ones, so **large updates** (on [`Channel::Updates`], of
+//! [`RtpsConfig::large_sample_bytes`] or more) travel on a topic of their own whose caches keep
+//! [`RtpsConfig::large_cache_samples`] (16), each followed by a marker on the updates topic, by which the receiving
+//! thread puts them back in their writer's order (`large.rs`): on loopback a run of large samples arrived well before
+//! the small updates written between them, and an agent asks at once for an operation a gap shows. Large samples on
+//! the other channels (snapshots and repairs on [`Channel::Sync`], which are rarer) stay on their channel's topic.
 //!
 //! A receiving thread waits on the readers with `mio` and moves samples into a **bounded inbox**; when the inbox is
 //! full it stops taking, and the readers' caches fill. They do not push back on the writers: a `rustdds` reader
