@@ -2,11 +2,10 @@
 //!
 //! Two DDS domain participants per agent (one for its writers, one for its readers), one non-keyed topic per
 //! [`Channel`] named `{prefix}_{channel}` (plus `{prefix}_updates_large` for large updates and `{prefix}_updates_be`
-//! with best-effort updates, below), every reader
-//! RELIABLE + KEEP_ALL + VOLATILE and every writer RELIABLE + KEEP_LAST + VOLATILE, all with **explicit
-//! [`ResourceLimits`] (`rustdds` otherwise keeps only 64 samples per reader)**. A sample travels as a CDR
-//! `sequence<octet>` (4-byte length, then the bytes), so any DDS implementation can read it with a one-field IDL
-//! type.
+//! with best-effort updates, below), every reader RELIABLE + KEEP_ALL + VOLATILE and every writer RELIABLE +
+//! KEEP_LAST + VOLATILE, all with **explicit [`ResourceLimits`] (`rustdds` otherwise keeps only 64 samples per
+//! reader)**. A sample travels as a CDR `sequence<octet>` (4-byte length, then the bytes), so any DDS implementation
+//! can read it with a one-field IDL type.
 //!
 //! **Memory.** A keep-all writer of `rustdds` 0.15 keeps every sample it wrote, acknowledged or not, up to
 //! [`RtpsConfig::max_samples`]; a keep-last writer still keeps every sample a matched reader has not acknowledged,

@@ -75,7 +75,9 @@ pub struct RtpsConfig {
     /// `ResourceLimits::max_samples` of the readers and topic of large updates (samples on [`Channel::Updates`] of
     /// [`RtpsConfig::large_sample_bytes`] or more travel there, see the module documentation, "Memory"): a
     /// receiving process holds up to this many large updates, and a burst of more than this many before the
-    /// receiving thread takes them loses the oldest.
+    /// receiving thread takes them loses the oldest (on the project's 2-core VM, 200 frames of 360,960 bytes
+    /// written at once to a receiver that handled each in 5 ms: 22 lost of a 16-sample cache, none of a 1,024 one;
+    /// none of a 16-sample cache when it handled each in 2 ms). Agents repair such losses by anti-entropy.
     pub large_cache_samples: i32,
     /// Samples the inbox holds before the receiving thread stops taking from the readers.
     pub inbox_capacity: usize,
