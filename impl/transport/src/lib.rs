@@ -297,6 +297,11 @@ pub struct TransportStats {
     /// Same-host peers reachable through shared memory now ([`hybrid`]; a gauge, not a counter).
     #[serde(default)]
     pub same_host_peers: u64,
+    /// Waits of the RTPS receiving thread for a large update or for its marker that ended without it (see [`rtps`],
+    /// "Memory"): one of the two was lost (evicted from a full cache, or its writer gone), and what waited went on
+    /// out of its writer's order. Agents repair the loss.
+    #[serde(default)]
+    pub large_waits_ended: u64,
 }
 
 /// Atomic counters behind [`TransportStats`].
@@ -310,6 +315,7 @@ pub struct Counters {
     dropped_full: AtomicU64,
     participant_failures: AtomicU64,
     participant_rebuilds: AtomicU64,
+    large_waits_ended: AtomicU64,
 }
 
 impl Counters {
@@ -318,6 +324,11 @@ impl Counters {
         self.samples_sent.fetch_add(1, Ordering::Relaxed);
         self.payload_bytes_sent.fetch_add(payload as u64, Ordering::Relaxed);
         self.wire_bytes_sent.fetch_add(wire as u64, Ordering::Relaxed);
+    }
+
+    /// Counts `n` waits for a large update that ended without it ([`TransportStats::large_waits_ended`]).
+    pub fn large_waits_ended(&self, n: u64) {
+        self.large_waits_ended.fetch_add(n, Ordering::Relaxed);
     }
 
     /// Counts one received sample.
@@ -365,6 +376,7 @@ impl Counters {
             duplicated_injected: 0,
             participant_failures: self.participant_failures.load(Ordering::Relaxed),
             participant_rebuilds: self.participant_rebuilds.load(Ordering::Relaxed),
+            large_waits_ended: self.large_waits_ended.load(Ordering::Relaxed),
             ..TransportStats::default()
         }
     }

@@ -94,6 +94,12 @@ impl Writer {
     }
 }
 
+/// The merge's counts, borrowed beside one of its writers.
+struct Counts<'a> {
+    held: &'a mut usize,
+    ended_waits: &'a mut u64,
+}
+
 /// The merge of the updates topic and the topic of large updates, per writer (see the module documentation).
 /// Samples come in through [`Order::update`], [`Order::marker`] and [`Order::large`], and leave, in order, into
 /// the vector each call is given.
@@ -101,6 +107,8 @@ impl Writer {
 pub(super) struct Order {
     writers: HashMap<EndpointId, Writer>,
     held: usize,
+    /// Waits that ended without their sample or marker since [`Order::take_ended_waits`] last took them.
+    ended_waits: u64,
 }
 
 impl Order {
@@ -122,6 +130,7 @@ impl Order {
         // Large samples that came before theirs: those of earlier markers, lost, go first.
         while writer.early.front().is_some_and(|(early, _, _)| *early < sequence) {
             if let Some((_, sample, _)) = writer.early.pop_front() {
+                self.ended_waits += 1;
                 Self::place(writer, sample, &mut self.held, out);
             }
         }
@@ -155,7 +164,9 @@ impl Order {
             }
         }
         match sample {
-            None => Self::release(writer, None, &mut self.held, out),
+            None => {
+                Self::release(writer, None, Counts { held: &mut self.held, ended_waits: &mut self.ended_waits }, out)
+            }
             // Its marker's wait has ended: its place has passed.
             Some(sample) if writer.marker_seen.is_some_and(|seen| seen >= sequence) => out.push(sample),
             Some(sample) => {
@@ -170,7 +181,7 @@ impl Order {
     pub(super) fn expire(&mut self, now: Instant, out: &mut Vec<Sample>) {
         for writer in self.writers.values_mut() {
             if writer.deadline().is_some_and(|deadline| deadline <= now) {
-                Self::end_waits(writer, now, &mut self.held, out);
+                Self::end_waits(writer, now, Counts { held: &mut self.held, ended_waits: &mut self.ended_waits }, out);
             }
         }
     }
@@ -178,6 +189,11 @@ impl Order {
     /// When the earliest wait ends, if any sample waits.
     pub(super) fn next_deadline(&self) -> Option<Instant> {
         self.writers.values().filter_map(Writer::deadline).min()
+    }
+
+    /// How many waits ended without their sample or marker since the last call.
+    pub(super) fn take_ended_waits(&mut self) -> u64 {
+        std::mem::take(&mut self.ended_waits)
     }
 
     /// Samples waiting now, all writers together.
@@ -199,7 +215,7 @@ impl Order {
 
     /// Hands on `writer`'s entries from the front while they are ready: an update, a large sample, or (with
     /// `expired_by`) a marker whose wait ended by then.
-    fn release(writer: &mut Writer, expired_by: Option<Instant>, held: &mut usize, out: &mut Vec<Sample>) {
+    fn release(writer: &mut Writer, expired_by: Option<Instant>, counts: Counts<'_>, out: &mut Vec<Sample>) {
         while let Some(front) = writer.queue.front() {
             if let Entry::Awaited { until, .. } = front
                 && !expired_by.is_some_and(|now| *until <= now)
@@ -208,22 +224,23 @@ impl Order {
             }
             match writer.queue.pop_front() {
                 Some(Entry::Update(sample) | Entry::Large(sample)) => {
-                    *held -= 1;
+                    *counts.held -= 1;
                     out.push(sample);
                 }
-                Some(Entry::Awaited { .. }) => tracing::debug!("rtps: a large update did not come within {MAX_WAIT:?}"),
-                Some(Entry::Lost) | None => {}
+                Some(Entry::Awaited { .. } | Entry::Lost) => *counts.ended_waits += 1,
+                None => {}
             }
         }
     }
 
     /// Ends `writer`'s waits due by `now`: its markers' (what waited behind them follows) and its early large
     /// samples' (handed on out of order).
-    fn end_waits(writer: &mut Writer, now: Instant, held: &mut usize, out: &mut Vec<Sample>) {
-        Self::release(writer, Some(now), held, out);
+    fn end_waits(writer: &mut Writer, now: Instant, counts: Counts<'_>, out: &mut Vec<Sample>) {
+        Self::release(writer, Some(now), Counts { held: counts.held, ended_waits: counts.ended_waits }, out);
         while writer.early.front().is_some_and(|(_, _, until)| *until <= now) {
             if let Some((_, sample, _)) = writer.early.pop_front() {
-                *held -= 1;
+                *counts.held -= 1;
+                *counts.ended_waits += 1;
                 out.push(sample);
             }
         }
@@ -241,7 +258,7 @@ impl Order {
             tracing::warn!(
                 "rtps: {MAX_HELD} samples wait for their place in their writers' order; the oldest wait ends"
             );
-            Self::end_waits(writer, deadline, &mut self.held, out);
+            Self::end_waits(writer, deadline, Counts { held: &mut self.held, ended_waits: &mut self.ended_waits }, out);
         }
     }
 
@@ -302,7 +319,7 @@ mod tests {
         assert_eq!(order.next_deadline(), Some(now + MAX_WAIT));
         order.large(sample(A, 50), 5, now, &mut out);
         assert_eq!(tags(&out), [1, 9, 50, 2]);
-        assert_eq!((order.held(), order.next_deadline()), (0, None));
+        assert_eq!((order.held(), order.next_deadline(), order.take_ended_waits()), (0, None, 0));
     }
 
     #[test]
@@ -329,6 +346,7 @@ mod tests {
         order.large(sample(A, 50), 5, now, &mut out);
         order.expire(now + MAX_WAIT, &mut out);
         assert_eq!(tags(&out), [50]);
+        assert_eq!(order.take_ended_waits(), 1);
         order.marker(A, 5, now + MAX_WAIT, &mut out);
         order.update(sample(A, 1), &mut out);
         assert_eq!(tags(&out), [50, 1], "the late marker holds nothing back");
@@ -342,7 +360,7 @@ mod tests {
         order.large(sample(A, 60), 6, now, &mut out);
         order.marker(A, 6, now, &mut out);
         assert_eq!(tags(&out), [50, 60]);
-        assert_eq!(order.held(), 0);
+        assert_eq!((order.held(), order.take_ended_waits()), (0, 1), "5's marker did not come");
     }
 
     #[test]
@@ -355,6 +373,7 @@ mod tests {
         assert!(out.is_empty());
         order.expire(now + MAX_WAIT, &mut out);
         assert_eq!(tags(&out), [1]);
+        assert_eq!(order.take_ended_waits(), 1);
         out.clear();
         // Sample 6 never comes; 7 does: 6 was lost, and what waited behind both goes, in order.
         order.marker(A, 6, now, &mut out);
@@ -363,7 +382,7 @@ mod tests {
         order.update(sample(A, 3), &mut out);
         order.large(sample(A, 70), 7, now, &mut out);
         assert_eq!(tags(&out), [2, 70, 3]);
-        assert_eq!((order.held(), order.next_deadline()), (0, None));
+        assert_eq!((order.held(), order.next_deadline(), order.take_ended_waits()), (0, None, 1));
         // Sample 5, whose wait ended, comes after all: handed on at once.
         order.large(sample(A, 50), 5, now, &mut out);
         assert_eq!(tags(&out), [2, 70, 3, 50]);

@@ -248,8 +248,13 @@ impl Taking {
         self.hand_on(outlet, stop)
     }
 
-    /// Passes on what the merge released; `false` when the transport is stopping.
+    /// Passes on what the merge released, and counts its waits that ended without their sample; `false` when the
+    /// transport is stopping.
     fn hand_on(&mut self, outlet: &Outlet, stop: &AtomicBool) -> bool {
+        let ended = self.order.take_ended_waits();
+        if ended > 0 {
+            outlet.counters.large_waits_ended(ended);
+        }
         self.out.drain(..).all(|sample| outlet.pass(sample, stop))
     }
 }
