@@ -297,9 +297,9 @@ pub struct TransportStats {
     /// Same-host peers reachable through shared memory now ([`hybrid`]; a gauge, not a counter).
     #[serde(default)]
     pub same_host_peers: u64,
-    /// Waits of the RTPS receiving thread for a large update or for its marker that ended without it (see [`rtps`],
-    /// "Memory"): one of the two was lost (evicted from a full cache, or its writer gone), and what waited went on
-    /// out of its writer's order. Agents repair the loss.
+    /// Waits of the RTPS receiving thread for a large update, behind its marker, that ended without it (see
+    /// [`rtps`], "Memory"): it was lost (evicted from a full cache, or its writer gone), and the updates that waited
+    /// went on. Agents repair the loss.
     #[serde(default)]
     pub large_waits_ended: u64,
 }

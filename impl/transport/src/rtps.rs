@@ -22,10 +22,11 @@
 //! a 64 one in one); agents repair such losses by anti-entropy. A cache of 1,024 samples of any size held 370 MB of
 //! 360,960-byte frames and would hold 4 GiB of 4 MiB ones, so **large updates** (on [`Channel::Updates`], of
 //! [`RtpsConfig::large_sample_bytes`] or more) travel on a topic of their own whose caches keep
-//! [`RtpsConfig::large_cache_samples`] (16), each followed by a marker on the updates topic, by which the receiving
-//! thread puts them back in their writer's order (`large.rs`): on loopback a run of large samples arrived well before
-//! the small updates written between them, and an agent asks at once for an operation a gap shows. Large samples on
-//! the other channels (snapshots and repairs on [`Channel::Sync`], which are rarer) stay on their channel's topic.
+//! [`RtpsConfig::large_cache_samples`] (16), each followed by a marker on the updates topic, behind which the
+//! receiving thread holds its writer's later updates until the large sample has come (`large.rs`): an agent asks at
+//! once for an operation a gap shows, and a small update that overtook a frame would have the frame sent again.
+//! Large samples on the other channels (snapshots and repairs on [`Channel::Sync`], which are rarer) stay on their
+//! channel's topic.
 //!
 //! A receiving thread waits on the readers with `mio` and moves samples into a **bounded inbox**; when the inbox is
 //! full it stops taking, and the readers' caches fill. They do not push back on the writers: a `rustdds` reader

@@ -213,7 +213,8 @@ struct Taking {
 
 impl Taking {
     /// Takes what every reader has (a notification may have been drained by an earlier round), the updates
-    /// topic's before the large updates' so that a large sample finds its marker, and hands on what is in order.
+    /// topic's before the large updates' so that a large sample finds its marker waiting, and hands on what is in
+    /// order.
     /// `false` when the transport is stopping.
     fn take_all(&mut self, reading: &Reading, outlet: &Outlet, stop: &AtomicBool) -> bool {
         for (channel, reader) in &reading.readers {
@@ -225,9 +226,7 @@ impl Taking {
                     continue;
                 }
                 match (*channel, large::marked(&sample.bytes)) {
-                    (Channel::Updates, Some(sequence)) => {
-                        self.order.marker(sample.origin, sequence, Instant::now(), &mut self.out);
-                    }
+                    (Channel::Updates, Some(sequence)) => self.order.marker(sample.origin, sequence, Instant::now()),
                     (Channel::Updates, None) => self.order.update(sample, &mut self.out),
                     _ => self.out.push(sample),
                 }
@@ -239,7 +238,7 @@ impl Taking {
         reading.large.drain_read_notifications();
         while let Some((sample, sequence)) = take_one(&reading.large, Channel::Updates, reading.local, &outlet.counters)
         {
-            self.order.large(sample, sequence, Instant::now(), &mut self.out);
+            self.order.large(sample, sequence, &mut self.out);
             if !self.hand_on(outlet, stop) {
                 return false;
             }
