@@ -146,7 +146,7 @@ fn large_updates_travel_on_their_own_topic_and_no_small_one_overtakes_the_large_
     // loopback the large ones usually come first, and may overtake small ones written before them; the case of a
     // marker before its large sample (the updates behind it wait) is `large::Order`'s unit tests'.
     let sample = |i: u32| {
-        let size = if i % 4 == 0 { 300_000 } else { 16 };
+        let size = if i.is_multiple_of(4) { 300_000 } else { 16 };
         let mut bytes = vec![(i % 251) as u8; size];
         bytes[..4].copy_from_slice(&i.to_le_bytes());
         Bytes::from(bytes)
@@ -172,13 +172,13 @@ fn large_updates_travel_on_their_own_topic_and_no_small_one_overtakes_the_large_
     sorted.sort_unstable();
     assert_eq!(sorted, (0..n).collect::<Vec<_>>(), "every update once; no marker");
     let at = |i: u32| received.iter().position(|&r| r == i).unwrap();
-    for small in (0..n).filter(|i| i % 4 != 0) {
+    for small in (0..n).filter(|i| !i.is_multiple_of(4)) {
         assert!(
             at(small) > at(small - small % 4),
             "small update {small} came before the large one before it: {received:?}"
         );
     }
-    let smalls: Vec<u32> = received.iter().copied().filter(|i| i % 4 != 0).collect();
+    let smalls: Vec<u32> = received.iter().copied().filter(|i| !i.is_multiple_of(4)).collect();
     assert!(smalls.is_sorted(), "the updates topic keeps its order: {received:?}");
     assert!(b.recv_timeout(Duration::from_millis(200)).is_none(), "nothing more: markers are consumed");
     let sent = a.stats().wire_bytes_sent - before.wire_bytes_sent;

@@ -92,7 +92,7 @@ impl Writer {
         let (mut updates, mut ended) = (0, 0);
         while let Some(front) = self.queue.front() {
             if let Entry::Awaited { until, .. } = front
-                && !expired_by.is_some_and(|now| *until <= now)
+                && expired_by.is_none_or(|now| *until > now)
             {
                 break;
             }
