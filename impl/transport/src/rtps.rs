@@ -390,12 +390,11 @@ impl RtpsTransport {
         if channel == Channel::Updates && reader.is_none() && size >= self.config.large_sample_bytes {
             return self.write_large(bytes);
         }
-        let writer = self.shared.writers[channel.index()].lock().unwrap_or_else(|p| p.into_inner());
-        let Some(writer) = writer.as_ref() else {
-            return Err(TransportError::ReadOnly { channel: channel.name() });
-        };
-        self.write_reliable(writer, channel, Payload(bytes), reader)?;
-        self.pace(writer, size);
+        with_writer(&self.shared.writers[channel.index()], channel, |writer| {
+            self.write_reliable(writer, channel, Payload(bytes), reader)?;
+            self.pace(writer, size);
+            Ok(())
+        })?;
         self.counters.sent(size, estimated_wire_bytes(size, true));
         Ok(())
     }
@@ -403,22 +402,17 @@ impl RtpsTransport {
     /// A large update: on the topic of large updates, then its marker on the updates topic (see [`large`]).
     fn write_large(&self, bytes: Bytes) -> Result<(), TransportError> {
         let size = bytes.len();
-        let sequence = {
-            let writer = self.shared.large.lock().unwrap_or_else(|p| p.into_inner());
-            let Some(writer) = writer.as_ref() else {
-                return Err(TransportError::ReadOnly { channel: Channel::Updates.name() });
-            };
-            let written = self.write_reliable(writer, Channel::Updates, Payload(bytes), None)?;
+        let updates = Channel::Updates;
+        let written = with_writer(&self.shared.large, updates, |writer| {
+            let written = self.write_reliable(writer, updates, Payload(bytes), None)?;
             self.pace(writer, size);
-            written.sequence_number
-        };
-        let marker = large::marker(sequence.into());
+            Ok(written)
+        })?;
+        let marker = large::marker(written.sequence_number.into());
         let marker_bytes = marker.len();
-        let writer = self.shared.writers[Channel::Updates.index()].lock().unwrap_or_else(|p| p.into_inner());
-        let Some(writer) = writer.as_ref() else {
-            return Err(TransportError::ReadOnly { channel: Channel::Updates.name() });
-        };
-        self.write_reliable(writer, Channel::Updates, Payload(marker), None)?;
+        with_writer(&self.shared.writers[updates.index()], updates, |writer| {
+            self.write_reliable(writer, updates, Payload(marker), None)
+        })?;
         self.counters.sent(size, estimated_wire_bytes(size, true) + estimated_wire_bytes(marker_bytes, true));
         Ok(())
     }
@@ -463,4 +457,15 @@ impl RtpsTransport {
             }
         }
     }
+}
+
+/// Runs `write` with the writer in `slot` (locked meanwhile), or refuses: a read-only transport has none for
+/// `channel`.
+fn with_writer<T>(
+    slot: &Mutex<Option<Writer>>,
+    channel: Channel,
+    write: impl FnOnce(&Writer) -> Result<T, TransportError>,
+) -> Result<T, TransportError> {
+    let writer = slot.lock().unwrap_or_else(|p| p.into_inner());
+    write(writer.as_ref().ok_or(TransportError::ReadOnly { channel: channel.name() })?)
 }

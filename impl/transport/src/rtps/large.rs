@@ -38,9 +38,9 @@ pub(super) const MAX_WAIT: Duration = Duration::from_secs(1);
 /// Updates that may wait, all writers together.
 pub(super) const MAX_HELD: usize = 4096;
 
-/// Writers remembered with nothing waiting (the sequence number of their last large sample), before they are
-/// forgotten.
-const MAX_IDLE_WRITERS: usize = 256;
+/// Writers whose last large sample's sequence number is remembered (to know a marker that comes after its sample),
+/// before those with nothing waiting are forgotten.
+const MAX_WRITERS_SEEN: usize = 256;
 
 /// The marker of the large sample with RTPS sequence number `sequence`.
 pub(super) fn marker(sequence: i64) -> Bytes {
@@ -55,14 +55,9 @@ pub(super) fn marked(bytes: &[u8]) -> Option<i64> {
     Some(i64::from_le_bytes(rest.try_into().ok()?))
 }
 
-/// One writer's place in the merge.
-#[derive(Debug, Default)]
-struct Writer {
-    /// Sequence number of the last large sample received from it.
-    large_seen: Option<i64>,
-    /// What waits, in the updates topic's order, from the first marker whose large sample has not come.
-    queue: VecDeque<Entry>,
-}
+/// What waits for one writer, in the updates topic's order, from its first marker whose large sample has not come:
+/// the front is always such a marker.
+type Queue = VecDeque<Entry>;
 
 #[derive(Debug)]
 enum Entry {
@@ -76,46 +71,53 @@ enum Entry {
     Update(Sample),
 }
 
-impl Writer {
-    /// When its wait ends, if it has one: the first entry of a non-empty queue is always a marker awaited.
-    fn deadline(&self) -> Option<Instant> {
-        match self.queue.front() {
-            Some(Entry::Awaited { until, .. }) => Some(*until),
-            _ => None,
-        }
+/// When `queue`'s wait ends.
+fn deadline(queue: &Queue) -> Option<Instant> {
+    match queue.front() {
+        Some(Entry::Awaited { until, .. }) => Some(*until),
+        _ => None,
     }
+}
 
-    /// Hands on the entries from the front while they are ready: an update, a large sample, or (with
-    /// `expired_by`) a marker whose wait ended by then. Returns the updates handed on and the waits ended
-    /// without their large sample.
-    fn release(&mut self, expired_by: Option<Instant>, out: &mut Vec<Sample>) -> (usize, u64) {
-        let (mut updates, mut ended) = (0, 0);
-        while let Some(front) = self.queue.front() {
-            if let Entry::Awaited { until, .. } = front
-                && expired_by.is_none_or(|now| *until > now)
-            {
-                break;
-            }
-            match self.queue.pop_front() {
-                Some(Entry::Update(sample)) => {
-                    updates += 1;
-                    out.push(sample);
-                }
-                Some(Entry::Large(sample)) => out.push(sample),
-                Some(Entry::Awaited { .. } | Entry::Lost) => ended += 1,
-                None => {}
-            }
+/// What [`release`] handed on of a queue: updates, and waits that ended without their large sample.
+#[derive(Default)]
+struct Released {
+    updates: usize,
+    ended_waits: u64,
+}
+
+/// Hands on `queue`'s entries from the front while they are ready: an update, a large sample, or (with
+/// `expired_by`) a marker whose wait ended by then.
+fn release(queue: &mut Queue, expired_by: Option<Instant>, out: &mut Vec<Sample>) -> Released {
+    let mut released = Released::default();
+    while let Some(front) = queue.front() {
+        if let Entry::Awaited { until, .. } = front
+            && expired_by.is_none_or(|now| *until > now)
+        {
+            break;
         }
-        (updates, ended)
+        match queue.pop_front() {
+            Some(Entry::Update(sample)) => {
+                released.updates += 1;
+                out.push(sample);
+            }
+            Some(Entry::Large(sample)) => out.push(sample),
+            Some(Entry::Awaited { .. } | Entry::Lost) => released.ended_waits += 1,
+            None => {}
+        }
     }
+    released
 }
 
 /// The receiving thread's order of each writer's updates (see the module documentation). Samples come in through
 /// [`Order::update`], [`Order::marker`] and [`Order::large`], and leave, in order, into the vector each call is
-/// given.
+/// given. Only writers with something waiting are in `waiting`, so the receiving thread's look at the deadlines on
+/// every round costs nothing while nothing waits.
 #[derive(Debug, Default)]
 pub(super) struct Order {
-    writers: HashMap<EndpointId, Writer>,
+    waiting: HashMap<EndpointId, Queue>,
+    /// The sequence number of each writer's last large sample (at most [`MAX_WRITERS_SEEN`] writers).
+    large_seen: HashMap<EndpointId, i64>,
     /// Updates waiting, all writers together.
     held: usize,
     /// Waits that ended without their large sample since [`Order::take_ended_waits`] last took them.
@@ -125,70 +127,65 @@ pub(super) struct Order {
 impl Order {
     /// A sample of the updates topic (or of the best-effort one): handed on, or kept behind its writer's marker.
     pub(super) fn update(&mut self, sample: Sample, out: &mut Vec<Sample>) {
-        match self.writers.get_mut(&sample.origin) {
-            Some(writer) if !writer.queue.is_empty() => {
-                writer.queue.push_back(Entry::Update(sample));
-                self.held += 1;
-                if self.held > MAX_HELD {
-                    self.end_oldest_wait(out);
-                }
-            }
-            _ => out.push(sample),
+        let Some(queue) = self.waiting.get_mut(&sample.origin) else {
+            return out.push(sample);
+        };
+        queue.push_back(Entry::Update(sample));
+        self.held += 1;
+        if self.held > MAX_HELD {
+            self.end_oldest_wait(out);
         }
     }
 
     /// A marker from `origin` for its large sample `sequence`, received at `now`: unless that sample came first,
     /// `origin`'s updates wait behind it.
     pub(super) fn marker(&mut self, origin: EndpointId, sequence: i64, now: Instant) {
-        let writer = self.writers.entry(origin).or_default();
-        if writer.large_seen.is_none_or(|seen| seen < sequence) {
-            writer.queue.push_back(Entry::Awaited { sequence, until: now + MAX_WAIT });
+        if self.large_seen.get(&origin).is_none_or(|seen| *seen < sequence) {
+            self.waiting.entry(origin).or_default().push_back(Entry::Awaited { sequence, until: now + MAX_WAIT });
         }
-        self.forget_idle_writers(origin);
     }
 
     /// A sample of the topic of large updates, with its RTPS sequence number: handed on at its marker's place if
     /// the marker waits, else at once.
     pub(super) fn large(&mut self, sample: Sample, sequence: i64, out: &mut Vec<Sample>) {
         let origin = sample.origin;
-        let writer = self.writers.entry(origin).or_default();
-        writer.large_seen = Some(writer.large_seen.map_or(sequence, |seen| seen.max(sequence)));
+        self.remember_large(origin, sequence);
         let mut sample = Some(sample);
-        for entry in &mut writer.queue {
-            match entry {
-                Entry::Awaited { sequence: marked, .. } if *marked == sequence => {
-                    if let Some(sample) = sample.take() {
-                        *entry = Entry::Large(sample);
+        if let Some(queue) = self.waiting.get_mut(&origin) {
+            for entry in queue.iter_mut() {
+                match entry {
+                    Entry::Awaited { sequence: marked, .. } if *marked == sequence => {
+                        if let Some(sample) = sample.take() {
+                            *entry = Entry::Large(sample);
+                        }
+                        break;
                     }
-                    break;
+                    // One writer's samples come in order: an earlier one that has not come is lost.
+                    Entry::Awaited { sequence: marked, .. } if *marked < sequence => *entry = Entry::Lost,
+                    _ => {}
                 }
-                // One writer's samples come in order: an earlier one that has not come is lost.
-                Entry::Awaited { sequence: marked, .. } if *marked < sequence => *entry = Entry::Lost,
-                _ => {}
             }
+            let released = release(queue, None, out);
+            self.settle(origin, released);
         }
-        let (updates, ended) = writer.release(None, out);
-        self.held -= updates;
-        self.ended_waits += ended;
         // No marker waits for it (it came first, or its marker's wait ended): at once.
         out.extend(sample);
-        self.forget_idle_writers(origin);
     }
 
     /// Ends the waits due by `now`, handing on what waited behind them.
     pub(super) fn expire(&mut self, now: Instant, out: &mut Vec<Sample>) {
-        for writer in self.writers.values_mut() {
-            if writer.deadline().is_some_and(|deadline| deadline <= now) {
-                let (updates, ended) = writer.release(Some(now), out);
-                self.held -= updates;
-                self.ended_waits += ended;
-            }
+        let due: Vec<EndpointId> = (self.waiting.iter())
+            .filter(|(_, queue)| deadline(queue).is_some_and(|at| at <= now))
+            .map(|(origin, _)| *origin)
+            .collect();
+        for origin in due {
+            self.end_wait(origin, now, out);
         }
     }
 
     /// When the earliest wait ends, if any update waits.
     pub(super) fn next_deadline(&self) -> Option<Instant> {
-        self.writers.values().filter_map(Writer::deadline).min()
+        self.waiting.values().filter_map(deadline).min()
     }
 
     /// How many waits ended without their large sample since the last call.
@@ -202,23 +199,41 @@ impl Order {
         self.held
     }
 
-    /// Past [`MAX_HELD`]: the writer whose wait is oldest stops waiting.
-    fn end_oldest_wait(&mut self, out: &mut Vec<Sample>) {
-        let oldest =
-            self.writers.values_mut().filter_map(|writer| Some((writer.deadline()?, writer))).min_by_key(|(at, _)| *at);
-        if let Some((deadline, writer)) = oldest {
-            tracing::warn!("rtps: {MAX_HELD} updates wait for large samples; the oldest wait ends");
-            let (updates, ended) = writer.release(Some(deadline), out);
-            self.held -= updates;
-            self.ended_waits += ended;
+    /// Ends `origin`'s waits due by `now`.
+    fn end_wait(&mut self, origin: EndpointId, now: Instant, out: &mut Vec<Sample>) {
+        if let Some(queue) = self.waiting.get_mut(&origin) {
+            let released = release(queue, Some(now), out);
+            self.settle(origin, released);
         }
     }
 
-    /// Forgets writers with nothing waiting, but `keep`, once more than [`MAX_IDLE_WRITERS`] are remembered.
-    fn forget_idle_writers(&mut self, keep: EndpointId) {
-        if self.writers.len() > MAX_IDLE_WRITERS {
-            self.writers.retain(|origin, writer| *origin == keep || !writer.queue.is_empty());
+    /// Counts what a release of `origin`'s queue handed on, and forgets the queue once empty.
+    fn settle(&mut self, origin: EndpointId, released: Released) {
+        self.held -= released.updates;
+        self.ended_waits += released.ended_waits;
+        if self.waiting.get(&origin).is_some_and(VecDeque::is_empty) {
+            self.waiting.remove(&origin);
         }
+    }
+
+    /// Past [`MAX_HELD`]: the writer whose wait is oldest stops waiting.
+    fn end_oldest_wait(&mut self, out: &mut Vec<Sample>) {
+        let oldest = self.waiting.iter().filter_map(|(origin, queue)| Some((deadline(queue)?, *origin))).min();
+        if let Some((deadline, origin)) = oldest {
+            tracing::warn!("rtps: {MAX_HELD} updates wait for large samples; the oldest wait ends");
+            self.end_wait(origin, deadline, out);
+        }
+    }
+
+    /// Remembers `origin`'s last large sample; past [`MAX_WRITERS_SEEN`] writers, forgets those with nothing
+    /// waiting (a marker of theirs that comes after its sample then waits, at most [`MAX_WAIT`]).
+    fn remember_large(&mut self, origin: EndpointId, sequence: i64) {
+        if self.large_seen.len() >= MAX_WRITERS_SEEN && !self.large_seen.contains_key(&origin) {
+            let waiting = &self.waiting;
+            self.large_seen.retain(|writer, _| waiting.contains_key(writer));
+        }
+        let seen = self.large_seen.entry(origin).or_insert(sequence);
+        *seen = (*seen).max(sequence);
     }
 }
 
@@ -342,16 +357,22 @@ mod tests {
     }
 
     #[test]
-    fn idle_writers_are_forgotten_past_the_bound() {
+    fn a_writer_whose_wait_ended_is_forgotten_and_the_writers_seen_are_bounded() {
         let (mut order, now) = (Order::default(), Instant::now());
         let mut out = Vec::new();
-        for writer in 0..=MAX_IDLE_WRITERS as u128 + 1 {
+        for writer in 0..=MAX_WRITERS_SEEN as u128 + 1 {
             order.marker(EndpointId(writer), 1, now);
             order.large(sample(EndpointId(writer), 1), 1, &mut out);
         }
-        assert_eq!(out.len(), MAX_IDLE_WRITERS + 2);
-        assert!(order.writers.len() <= MAX_IDLE_WRITERS + 1);
-        order.marker(A, 1, now);
-        assert!(order.writers.contains_key(&A));
+        assert_eq!(out.len(), MAX_WRITERS_SEEN + 2);
+        assert!(order.waiting.is_empty(), "nothing waits: no writer is looked at on a round");
+        assert!(order.large_seen.len() <= MAX_WRITERS_SEEN);
+        // A writer that waits is remembered when the others are forgotten.
+        order.large(sample(A, 50), 5, &mut out);
+        order.marker(A, 9, now);
+        for writer in 0..=MAX_WRITERS_SEEN as u128 {
+            order.large(sample(EndpointId(writer + 1000), 1), 1, &mut out);
+        }
+        assert_eq!((order.large_seen.get(&A), order.waiting.contains_key(&A)), (Some(&5), true));
     }
 }
