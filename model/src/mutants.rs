@@ -1,8 +1,11 @@
 //! The mutant check: plants each known bug in the real implementation and checks that a model kills it, with a
-//! readable counterexample (the shortest: breadth-first, one thread).
+//! readable counterexample (the shortest: each check breadth-first on one thread; the checks run side by side, one
+//! per core).
 //!
 //! Only with the `mutants` feature, which enables the switches in `dsr` and `bica`; a normal build cannot plant
 //! anything.
+
+use std::sync::Mutex;
 
 use agent::mutants::ProtocolMutant;
 use dsr::DsrMutant;
@@ -119,29 +122,41 @@ pub type Wanted<'a> = &'a dyn Fn(&str) -> bool;
 
 /// Runs the replica mutants `wanted` accepts through the convergence model.
 pub fn check_dsr_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
+    run_side_by_side(dsr_jobs(progress, wanted))
+}
+
+fn dsr_jobs(progress: bool, wanted: Wanted<'_>) -> Vec<Job> {
     dsr_mutant_configs()
         .into_iter()
         .filter(|(mutant, _)| wanted(&dsr_name(*mutant)))
-        .map(|(mutant, config)| {
-            let report = check_convergence(&config, &mutant_options(progress));
-            MutantResult::from_report(dsr_name(mutant), report)
+        .map(|(mutant, config)| -> Job {
+            Box::new(move || {
+                let report = check_convergence(&config, &mutant_options(progress));
+                MutantResult::from_report(dsr_name(mutant), report)
+            })
         })
         .collect()
 }
 
 /// Runs the scheduler mutants `wanted` accepts through the scheduler model.
 pub fn check_scheduler_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
+    run_side_by_side(scheduler_jobs(progress, wanted))
+}
+
+fn scheduler_jobs(progress: bool, wanted: Wanted<'_>) -> Vec<Job> {
     scheduler_mutants()
         .into_iter()
         .filter(|case| wanted(&bica_name(case.name)))
-        .map(|case| {
-            let report = check_scheduler(case.config, &mutant_options(progress));
-            let mut result = MutantResult::from_report(bica_name(case.name), report);
-            // Report the property the mutant is meant to break first, when it is among the failures.
-            if let Some(expected) = result.report.failures().find(|p| p.name == case.expected_property) {
-                result.counterexample = expected.path.clone();
-            }
-            result
+        .map(|case| -> Job {
+            Box::new(move || {
+                let report = check_scheduler(case.config, &mutant_options(progress));
+                let mut result = MutantResult::from_report(bica_name(case.name), report);
+                // Report the property the mutant is meant to break first, when it is among the failures.
+                if let Some(expected) = result.report.failures().find(|p| p.name == case.expected_property) {
+                    result.counterexample = expected.path.clone();
+                }
+                result
+            })
         })
         .collect()
 }
@@ -182,16 +197,22 @@ pub fn agent_mutant_configs() -> Vec<(ProtocolMutant, AgentsConfig, &'static str
 
 /// Runs the protocol mutants `wanted` accepts through the agents model.
 pub fn check_agent_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
+    run_side_by_side(agent_jobs(progress, wanted))
+}
+
+fn agent_jobs(progress: bool, wanted: Wanted<'_>) -> Vec<Job> {
     agent_mutant_configs()
         .into_iter()
         .filter(|(mutant, _, _)| wanted(&agent_name(*mutant)))
-        .map(|(mutant, config, property)| {
-            let report = check_agents(&config, &mutant_options(progress));
-            let mut result = MutantResult::from_report(agent_name(mutant), report);
-            if let Some(expected) = result.report.failures().find(|p| p.name == property) {
-                result.counterexample = expected.path.clone();
-            }
-            result
+        .map(|(mutant, config, property)| -> Job {
+            Box::new(move || {
+                let report = check_agents(&config, &mutant_options(progress));
+                let mut result = MutantResult::from_report(agent_name(mutant), report);
+                if let Some(expected) = result.report.failures().find(|p| p.name == property) {
+                    result.counterexample = expected.path.clone();
+                }
+                result
+            })
         })
         .collect()
 }
@@ -201,12 +222,41 @@ pub fn check_all_mutants(progress: bool) -> Vec<MutantResult> {
     check_mutants(progress, &|_| true)
 }
 
-/// Runs the mutants of the three models that `wanted` accepts, in the order of [`mutant_names`].
+/// Runs the mutants of the three models that `wanted` accepts, in the order of [`mutant_names`]: side by side, one
+/// check per core (each check is still breadth-first on one thread, so its counterexample is a shortest one).
 pub fn check_mutants(progress: bool, wanted: Wanted<'_>) -> Vec<MutantResult> {
-    let mut results = check_dsr_mutants(progress, wanted);
-    results.extend(check_scheduler_mutants(progress, wanted));
-    results.extend(check_agent_mutants(progress, wanted));
-    results
+    let mut jobs = dsr_jobs(progress, wanted);
+    jobs.extend(scheduler_jobs(progress, wanted));
+    jobs.extend(agent_jobs(progress, wanted));
+    run_side_by_side(jobs)
+}
+
+/// One mutant's check, ready to run on any thread.
+type Job = Box<dyn FnOnce() -> MutantResult + Send>;
+
+/// Runs `jobs` on as many threads as the machine has cores (at most one per job) and returns their results in the
+/// jobs' order. The checks share nothing: each replica or agent carries the mutant planted in it.
+fn run_side_by_side(jobs: Vec<Job>) -> Vec<MutantResult> {
+    let count = jobs.len();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(count);
+    let queue = Mutex::new(jobs.into_iter().enumerate());
+    let done = Mutex::new(Vec::with_capacity(count));
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| {
+                loop {
+                    // The guard is dropped before the job runs, so the other threads take the next ones meanwhile.
+                    let next = queue.lock().unwrap_or_else(|p| p.into_inner()).next();
+                    let Some((index, job)) = next else { break };
+                    let result = job();
+                    done.lock().unwrap_or_else(|p| p.into_inner()).push((index, result));
+                }
+            });
+        }
+    });
+    let mut done = done.into_inner().unwrap_or_else(|p| p.into_inner());
+    done.sort_by_key(|(index, _)| *index);
+    done.into_iter().map(|(_, result)| result).collect()
 }
 
 /// The name of every mutant, as [`MutantResult::mutant`] gives it: `dsr::…`, `bica::…`, `agent::…`.
