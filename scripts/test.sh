@@ -4,11 +4,17 @@
 #
 # Builds. Cargo resolves the features of some dependencies (build dependencies and proc-macros among them)
 # according to the targets a command selects, and compiles a crate again for each different set: iceoryx2 and much
-# of the workspace, about a minute each time on two cores. So one test build (`cargo test --workspace`: libraries,
-# binaries, tests, examples and doc tests) serves the Python tests, the test run with the doc tests and the
+# of the workspace, about a minute each time on two cores. So one test build (`cargo test --workspace --no-run`:
+# libraries, binaries, tests and examples) serves the Python tests, the doc tests, every test executable and the
 # multicast rerun, and the planted bugs (the mutation switch, a cargo feature a normal build never enables)
 # compile only the crates the switch changes. The criterion benches are not run here: selecting them
 # (`--all-targets`, `--benches`) resolves the other set; clippy (`--all-targets`, in .ci/run) compiles them.
+#
+# Two lanes. Most tests run real processes and wait on them, leaving the machine half idle; the work that only
+# needs CPU (the Python module's build, the doc tests, the mutants' build and the model checks of the default
+# configuration and of the planted bugs) runs meanwhile in a background lane at the lowest priority (`nice 19`),
+# so it takes the idle time and yields the processors to the tests at once. The background lane's output is
+# printed when it ends; a failure in either lane fails the command.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # DDS Security's OpenSSL is built from source: it needs perl (with its core modules) and make.
@@ -27,38 +33,108 @@ if [ "$(id -u)" = 0 ]; then
 else
   echo "note: not root: the chaos campaign's test does not run (it needs network namespaces and nftables)" >&2
 fi
-# The Python module `cortex_dsr` (python/): installs python3-venv if needed (pyo3's build script, in the workspace
-# build too, asks python3 for its version), builds the module with maturin into a venv under the target directory
-# and the `cortex` binary, and runs the Python tests, including a Python agent beside `cortex agent` processes.
-bash scripts/test-python.sh
 # No import cycle between the modules of any crate (ARCHITECTURE.md, "Conventions").
 python3 scripts/module-cycles.py
+
+target="${CARGO_TARGET_DIR:-$PWD/target}"
+work="$(mktemp -d)"
+background=""
+cleanup() {
+  if [ -n "$background" ] && [ ! -e "$work/background.rc" ]; then
+    kill -- "-$background" 2>/dev/null || true
+  fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
+
+# The one test build, and the list of its test executables.
+cargo test --workspace --no-run --message-format=json-render-diagnostics > "$work/build.json"
 # Every intra-doc link resolves and no public item's documentation links to a private one (the API docs a user
-# reads, `cargo doc`): about half a minute once clippy has checked the workspace.
+# reads, `cargo doc`).
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
-cargo test --workspace
+
+# The default `cortex check convergence` (3 replicas, 3 operations, a clock advance: some 3.3 million states), run
+# in the background lane instead of with the other tests of its file.
+default_check=three_replicas_three_ops_one_clock_advance_the_default_check_converge_and_match_the_spec_in_every_state
+
+# The background lane. Its steps leave a file in $work as each ends, for the foreground to wait on.
+background_lane() {
+  set -euo pipefail
+  trap 'echo $? > "$work/background.rc"' EXIT
+  bash scripts/test-python.sh build
+  touch "$work/python.built"
+  cargo test --workspace --doc
+  python3 scripts/test-binaries.py convergence_model < "$work/build.json" | run_tests --exact "$default_check"
+  # The planted bugs, in one build with the mutation switch: the tests that plant them (bica's, the model's and
+  # the command's tests/mutants.rs, the scheduler model's `mod mutants`), and the convergence and agents models
+  # with the switch built in and no bug planted (the baseline: a mutant is killed by the property that holds
+  # without it). The command's tests/mutants.rs runs a chaos campaign, so it runs in the foreground. The build's
+  # final artifacts go to a directory of their own, so that its `cortex` does not replace the one the foreground's
+  # tests are running; it shares the intermediate ones (`build.build-dir`), so only what the switch changes is
+  # compiled.
+  CARGO_BUILD_BUILD_DIR="$target" CARGO_TARGET_DIR="$target/mutants" \
+    cargo test --workspace --features harness/mutants --no-run --message-format=json-render-diagnostics \
+    --test mutants --test scheduler_model --test convergence_model --test agents_model > "$work/mutants.json"
+  touch "$work/mutants.built"
+  python3 scripts/test-binaries.py --not-package harness < "$work/mutants.json" | run_tests
+}
+
+# Runs the test executables listed on standard input (scripts/test-binaries.py's lines) as `cargo test` runs
+# them, each with the arguments given; stops at the first that fails.
+run_tests() {
+  local dir executable label
+  while IFS="$(printf "\t")" read -r dir executable label; do
+    echo "     Running $label ($executable)"
+    (cd "$dir" && CARGO_MANIFEST_DIR="$dir" "$executable" "$@" < /dev/null)
+  done
+}
+
+# Waits until the background lane has left the file $1 in $work; fails, with the lane's output, if the lane ended
+# without it.
+await() {
+  while [ ! -e "$work/$1" ]; do
+    if [ -e "$work/background.rc" ]; then
+      echo "error: the background lane ended before $1 (exit code $(cat "$work/background.rc")); its output:" >&2
+      cat "$work/background.log" >&2
+      exit 1
+    fi
+    sleep 1
+  done
+}
+
+export work target default_check
+export -f background_lane run_tests
+setsid nice -n 19 bash -c background_lane > "$work/background.log" 2>&1 < /dev/null &
+background=$!
+
+# The foreground lane: every test executable of the build (the default check is the background's).
+python3 scripts/test-binaries.py < "$work/build.json" | run_tests --skip "$default_check"
 # The RTPS tests once more in a fresh network namespace whose loopback is multicast-capable, where
 # `RtpsConfig::multicast` (default `Auto`) turns multicast on (two participants per transport, one datagram for all
 # same-host readers), plus a non-loopback address on lo as any networked host has (rustdds never routes unicast to
 # a reader that advertises only 127.0.0.1, so per-reader repairs would go to the whole group; measure::netns does the
-# same). The bench tests in harness/tests/bench_netns.rs make their own namespaces. The executables are those the
-# command above built and ran (scripts/test-binaries.py says why not `cargo test --test NAME`), run as cargo runs them.
+# same). The bench tests in harness/tests/bench_netns.rs make their own namespaces.
 if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/dev/null; then
-  binaries="$(mktemp)"
-  trap 'rm -f "$binaries"' EXIT
-  cargo test --workspace --no-run --message-format=json \
-    | python3 scripts/test-binaries.py rtps_loopback calls agents_multiprocess agents_roles agents_pause > "$binaries"
+  python3 scripts/test-binaries.py rtps_loopback calls agents_multiprocess agents_roles agents_pause \
+    < "$work/build.json" > "$work/multicast.tsv"
   unshare --net -- bash -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
     ip addr add 198.18.0.1/32 dev lo
-    while IFS="$(printf "\t")" read -r dir executable; do
-      echo "     Running $executable (multicast on lo)"
-      (cd "$dir" && CARGO_MANIFEST_DIR="$dir" "$executable")
-    done < "$1"' bash "$binaries"
+    sed "s/\t\([^\t]*\)$/\t\1 (multicast on lo)/" "$1" | run_tests' bash "$work/multicast.tsv"
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
-# The planted bugs, in one build with the mutation switch: the tests that plant them (bica's, the model's and the
-# command's tests/mutants.rs, the scheduler model's `mod mutants`), and the convergence and agents models with the
-# switch built in and no bug planted (the baseline: a mutant is killed by the property that holds without it).
-cargo test --workspace --features harness/mutants \
-  --test mutants --test scheduler_model --test convergence_model --test agents_model
+# The Python module's tests, including a Python agent beside `cortex agent` processes.
+await python.built
+bash scripts/test-python.sh run
+# The command's planted-bug tests (`cortex check mutants`, a campaign with a planted protocol bug).
+await mutants.built
+python3 scripts/test-binaries.py --package harness mutants < "$work/mutants.json" | run_tests
+
+echo "     Waiting for the background lane (doc tests, the default convergence check, the planted bugs)"
+wait "$background" || true
+cat "$work/background.log"
+rc="$(cat "$work/background.rc" 2>/dev/null || echo 1)"
+if [ "$rc" != 0 ]; then
+  echo "error: the background lane failed (exit code $rc); its output is above" >&2
+  exit 1
+fi
