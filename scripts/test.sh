@@ -39,9 +39,16 @@ python3 scripts/module-cycles.py
 target="${CARGO_TARGET_DIR:-$PWD/target}"
 work="$(mktemp -d)"
 background=""
+# On the way out: a background lane still running (the foreground failed) is stopped, and its output so far shown.
 cleanup() {
   if [ -n "$background" ] && [ ! -e "$work/background.rc" ]; then
     kill -- "-$background" 2>/dev/null || true
+    for _ in $(seq 50); do
+      kill -0 -- "-$background" 2>/dev/null || break
+      sleep 0.2
+    done
+    echo "note: the background lane was stopped; its output until then:" >&2
+    cat "$work/background.log" >&2 || true
   fi
   rm -rf "$work"
 }

@@ -40,10 +40,11 @@ fn pki_init(dir: &Path, args: &[&str]) {
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
 }
 
-/// A `cortex agent` that must refuse to start; returns its standard error.
+/// A `cortex agent` that must refuse to start, or to edit once it has joined; returns its standard error. It exits
+/// as soon as it refuses; the bound is for a secured join, which has taken more than 8 s on a loaded machine.
 fn refused(args: &[&str]) -> String {
     let output = Command::new(env!("CARGO_BIN_EXE_cortex"))
-        .args(["agent", "--json-status", "--state-dir", "none", "--run-for-ms", "8000"])
+        .args(["agent", "--json-status", "--state-dir", "none", "--run-for-ms", "60000"])
         .args(args)
         .output()
         .expect("cortex agent runs");
