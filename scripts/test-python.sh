@@ -1,17 +1,18 @@
 #!/usr/bin/env bash
-# The Python module's part of the test command (scripts/test.sh runs it; it also runs alone): builds `cortex_dsr`
-# into a virtual environment under the cargo target directory with maturin, builds the `cortex` binary for the
-# two-process and ROS 2 bridge tests, and runs the Python tests (plain unittest). As root on a machine without
-# Python's venv module, installs it first with apt.
+# The Python module's part of the test command (scripts/test.sh runs it; it also runs alone): a virtual environment
+# under the cargo target directory with numpy and cyclonedds, then the workspace's test build, which builds the
+# extension `cortex_dsr` and the `cortex` binary, and the test target that runs the Python tests against them
+# (python/tests/python.rs: plain unittest, including a Python agent beside `cortex agent` processes). As root on a
+# machine without Python's venv module, installs it first with apt.
 #
-# `scripts/test-python.sh build` stops once the module is installed and `scripts/test-python.sh run` only runs the
-# tests: scripts/test.sh builds in the background while the Rust tests run, and runs these tests after them.
+# `scripts/test-python.sh venv` only makes the environment: scripts/test.sh does that, and its test run then runs
+# the Python tests with the others.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 target="${CARGO_TARGET_DIR:-$PWD/target}"
 venv="$target/python-venv"
 
-build_module() {
+make_venv() {
   if ! command -v python3 >/dev/null || ! python3 -c 'import venv, ensurepip' 2>/dev/null; then
     if [ "$(id -u)" = 0 ]; then
       (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3 python3-venv python3-pip) >/dev/null
@@ -25,24 +26,21 @@ build_module() {
   fi
   # cyclonedds: Eclipse Cyclone DDS's Python binding (its wheel bundles the C library), the second vendor's DDS
   # that python/tests/test_ros2_bridge.py runs `cortex bridge ros2` against.
-  "$venv/bin/python" -m pip install -q --disable-pip-version-check "maturin>=1.9,<2" "numpy>=1.21" "cyclonedds>=11,<12"
-  # The `cortex` binary as the workspace's test build makes it (for the command's own tests; nothing to do when
-  # scripts/test.sh has made that build: a plain `cargo build` resolves some dependencies' features differently
-  # and would compile much of the workspace twice).
-  cargo test -q --workspace --no-run
-  # A debug build, installed into the venv (README: `pip install ./python` builds the release wheel instead).
-  # maturin builds the one package, so cargo resolves its dependencies' features for it alone: about two minutes
-  # of compiling on two cores that the workspace's build does not share.
-  VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop -q --manifest-path python/Cargo.toml
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check "numpy>=1.21" "cyclonedds>=11,<12"
 }
 
+# The workspace's test build (a build of the Python package alone resolves its dependencies' features otherwise
+# and compiles much of the workspace again), then its Python test target.
 run_tests() {
-  CARGO_TARGET_DIR="$target" "$venv/bin/python" -m unittest discover -s python/tests -t python/tests -v
+  cargo test --workspace --no-run --message-format=json-render-diagnostics \
+    | python3 scripts/test-binaries.py python \
+    | while IFS="$(printf "\t")" read -r dir executable _; do
+      (cd "$dir" && "$executable" < /dev/null)
+    done
 }
 
 case "${1:-all}" in
-  all) build_module; run_tests ;;
-  build) build_module ;;
-  run) run_tests ;;
-  *) echo "usage: $0 [build|run]" >&2; exit 2 ;;
+  all) make_venv; run_tests ;;
+  venv) make_venv ;;
+  *) echo "usage: $0 [venv]" >&2; exit 2 ;;
 esac

@@ -5,14 +5,14 @@
 # Builds. Cargo resolves the features of some dependencies (build dependencies and proc-macros among them)
 # according to the targets a command selects, and compiles a crate again for each different set: iceoryx2 and much
 # of the workspace, about a minute each time on two cores. So one test build (`cargo test --workspace --no-run`:
-# libraries, binaries, tests and examples) serves the Python tests, the doc tests, every test executable and the
-# multicast rerun, and the planted bugs (the mutation switch, a cargo feature a normal build never enables)
+# libraries, binaries, tests and examples, the Python extension among them) serves every test executable (the
+# Python tests' too), the doc tests and the multicast rerun, and the planted bugs (the mutation switch, a cargo feature a normal build never enables)
 # compile only the crates the switch changes. The criterion benches are not run here: selecting them
 # (`--all-targets`, `--benches`) resolves the other set; clippy (`--all-targets`, in .ci/run) compiles them.
 #
 # Two lanes. Most tests run real processes and wait on them, leaving the machine half idle; the work that only
-# needs CPU (the Python module's build, the doc tests, the mutants' build and the model checks of the default
-# configuration and of the planted bugs) runs meanwhile in a background lane at the lowest priority (`nice 19`),
+# needs CPU (the doc tests, the mutants' build and the model checks of the default configuration and of the
+# planted bugs) runs meanwhile in a background lane at the lowest priority (`nice 19`),
 # so it takes the idle time and yields the processors to the tests at once. The background lane's output is
 # printed when it ends; a failure in either lane fails the command.
 set -euo pipefail
@@ -33,6 +33,8 @@ if [ "$(id -u)" = 0 ]; then
 else
   echo "note: not root: the chaos campaign's test does not run (it needs network namespaces and nftables)" >&2
 fi
+# The Python tests' virtual environment (numpy, cyclonedds); the test run below runs them (python/tests/python.rs).
+bash scripts/test-python.sh venv
 # No import cycle between the modules of any crate (ARCHITECTURE.md, "Conventions").
 python3 scripts/module-cycles.py
 
@@ -68,8 +70,6 @@ default_check=three_replicas_three_ops_one_clock_advance_the_default_check_conve
 background_lane() {
   set -euo pipefail
   trap 'echo $? > "$work/background.rc"' EXIT
-  bash scripts/test-python.sh build
-  touch "$work/python.built"
   cargo test --workspace --doc
   python3 scripts/test-binaries.py convergence_model < "$work/build.json" | run_tests --exact "$default_check"
   # The planted bugs, in one build with the mutation switch: the tests that plant them (bica's, the model's and
@@ -130,9 +130,6 @@ if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/de
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
-# The Python module's tests, including a Python agent beside `cortex agent` processes.
-await python.built
-bash scripts/test-python.sh run
 # The command's planted-bug tests (`cortex check mutants`, a campaign with a planted protocol bug).
 await mutants.built
 python3 scripts/test-binaries.py --package harness mutants < "$work/mutants.json" | run_tests
