@@ -66,12 +66,12 @@ RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 # in the background lane instead of with the other tests of its file.
 default_check=three_replicas_three_ops_one_clock_advance_the_default_check_converge_and_match_the_spec_in_every_state
 
-# The background lane. Its steps leave a file in $work as each ends, for the foreground to wait on.
+# The background lane. The mutants build comes before the model checks, so that the foreground can run the
+# command's planted-bug tests while they run; it leaves a file in $work for the foreground to wait on.
 background_lane() {
   set -euo pipefail
   trap 'echo $? > "$work/background.rc"' EXIT
   cargo test --workspace --doc
-  python3 scripts/test-binaries.py convergence_model < "$work/build.json" | run_tests --exact "$default_check"
   # The planted bugs, in one build with the mutation switch: the tests that plant them (bica's, the model's and
   # the command's tests/mutants.rs, the scheduler model's `mod mutants`), and the convergence and agents models
   # with the switch built in and no bug planted (the baseline: a mutant is killed by the property that holds
@@ -83,6 +83,7 @@ background_lane() {
     cargo test --workspace --features harness/mutants --no-run --message-format=json-render-diagnostics \
     --test mutants --test scheduler_model --test convergence_model --test agents_model > "$work/mutants.json"
   touch "$work/mutants.built"
+  python3 scripts/test-binaries.py convergence_model < "$work/build.json" | run_tests --exact "$default_check"
   python3 scripts/test-binaries.py --not-package harness < "$work/mutants.json" | run_tests
 }
 
