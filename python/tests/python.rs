@@ -31,14 +31,14 @@ fn run() -> Result<ExitCode, String> {
         );
         return Ok(ExitCode::SUCCESS);
     }
-    let package = install(&python, tmp)?;
+    let modules = install(&python, tmp)?;
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
     let status = Command::new(&python)
         .args(["-m", "unittest", "discover", "-v", "-s"])
         .arg(&tests)
         .arg("-t")
         .arg(&tests)
-        .env("PYTHONPATH", package.parent().ok_or("no parent")?)
+        .env("PYTHONPATH", modules)
         .env("CARGO_TARGET_DIR", target)
         .status()
         .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
@@ -46,7 +46,7 @@ fn run() -> Result<ExitCode, String> {
 }
 
 /// Makes `<tmp>/python-module/cortex_dsr/` (the extension this build made, under the name `python` expects, and
-/// the `__init__.py`); returns the package's directory.
+/// the `__init__.py`); returns the directory to put on `PYTHONPATH`.
 fn install(python: &Path, tmp: &Path) -> Result<PathBuf, String> {
     let exe = std::env::current_exe().map_err(|e| format!("cannot find this test executable: {e}"))?;
     let extension = exe.with_file_name("libcortex_dsr.so");
@@ -61,11 +61,12 @@ fn install(python: &Path, tmp: &Path) -> Result<PathBuf, String> {
     if !output.status.success() || suffix.is_empty() {
         return Err("the interpreter gave no extension suffix".to_owned());
     }
-    let package = tmp.join("python-module/cortex_dsr");
+    let modules = tmp.join("python-module");
+    let package = modules.join("cortex_dsr");
     std::fs::create_dir_all(&package).map_err(|e| format!("cannot create {}: {e}", package.display()))?;
     let module = package.join(format!("cortex_dsr{suffix}"));
     let _ = std::fs::remove_file(&module);
     std::os::unix::fs::symlink(&extension, &module).map_err(|e| format!("cannot link {}: {e}", module.display()))?;
     std::fs::write(package.join("__init__.py"), INIT_PY).map_err(|e| format!("cannot write __init__.py: {e}"))?;
-    Ok(package)
+    Ok(modules)
 }
