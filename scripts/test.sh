@@ -17,7 +17,7 @@
 # printed when it ends; a failure in either lane fails the command.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-# DDS Security's OpenSSL is built from source: it needs perl (with its core modules) and make.
+# DDS Security links the system's OpenSSL: libssl-dev and pkg-config.
 bash scripts/build-deps.sh
 # The inspector's browser test (impl/inspector/tests/browser.rs) drives Debian's chromium through chromedriver.
 if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
