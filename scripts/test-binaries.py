@@ -2,13 +2,14 @@
 """Lists test executables from cargo's JSON build messages.
 
 Usage: cargo test --workspace --no-run --message-format=json \\
-         | python3 scripts/test-binaries.py [--package P] [--not-package P] [NAME...]
+         | python3 scripts/test-binaries.py [--package P] [--not-package P] [--label-suffix S] [NAME...]
 
 Prints one line per test executable, in the order `cargo test` runs them (by package, then the library's unit
 tests, the binaries', the integration tests by name): its package's directory, a tab, the executable, a tab, what
 cargo's "Running" line calls it (`package: unittests src/lib.rs`, `package: tests/NAME.rs`). With NAMEs, only the
 integration-test targets of those names; exits with 1, naming them, if one is missing from the messages.
-`--package` keeps one package's executables, `--not-package` drops one package's (each may be given more than once).
+`--package` keeps one package's executables, `--not-package` drops one package's (each may be given more than once);
+`--label-suffix` is appended to every label (` (multicast on lo)` for a rerun).
 
 scripts/test.sh runs the test executables of its one test build this way: a cargo command that selected only some
 targets would resolve some dependencies' features differently and compile much of the workspace again (cargo's
@@ -60,6 +61,7 @@ def main(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--package", action="append", default=[])
     parser.add_argument("--not-package", action="append", default=[])
+    parser.add_argument("--label-suffix", default="")
     parser.add_argument("names", nargs="*")
     args = parser.parse_args(argv)
     chosen = [
@@ -75,7 +77,7 @@ def main(argv):
             return 1
         chosen = [by_name[name] for name in args.names]
     for package, kind, name, directory, executable, label in chosen:
-        print("\t".join((directory, executable, label)))
+        print("\t".join((directory, executable, label + args.label_suffix)))
     return 0
 
 

@@ -31,16 +31,14 @@ make_venv() {
 
 # The workspace's test build (a build of the Python package alone resolves its dependencies' features otherwise
 # and compiles much of the workspace again), then its Python test target.
-run_tests() {
+run_python_tests() {
+  source scripts/run-tests.sh
   cargo test --workspace --no-run --message-format=json-render-diagnostics \
-    | python3 scripts/test-binaries.py python \
-    | while IFS="$(printf "\t")" read -r dir executable _; do
-      (cd "$dir" && "$executable" < /dev/null)
-    done
+    | python3 scripts/test-binaries.py python | run_tests
 }
 
 case "${1:-all}" in
-  all) make_venv; run_tests ;;
+  all) make_venv; run_python_tests ;;
   venv) make_venv ;;
   *) echo "usage: $0 [venv]" >&2; exit 2 ;;
 esac

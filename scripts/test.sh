@@ -87,15 +87,8 @@ background_lane() {
   python3 scripts/test-binaries.py --not-package harness < "$work/mutants.json" | run_tests
 }
 
-# Runs the test executables listed on standard input (scripts/test-binaries.py's lines) as `cargo test` runs
-# them, each with the arguments given; stops at the first that fails.
-run_tests() {
-  local dir executable label
-  while IFS="$(printf "\t")" read -r dir executable label; do
-    echo "     Running $label ($executable)"
-    (cd "$dir" && CARGO_MANIFEST_DIR="$dir" "$executable" "$@" < /dev/null)
-  done
-}
+# run_tests: the test executables listed on standard input, as `cargo test` runs them.
+source scripts/run-tests.sh
 
 # Waits until the background lane has left the file $1 in $work; fails, with the lane's output, if the lane ended
 # without it.
@@ -123,11 +116,11 @@ python3 scripts/test-binaries.py < "$work/build.json" | run_tests --skip "$defau
 # a reader that advertises only 127.0.0.1, so per-reader repairs would go to the whole group; measure::netns does the
 # same). The bench tests in harness/tests/bench_netns.rs make their own namespaces.
 if [ "$(id -u)" = 0 ] && command -v ip >/dev/null && unshare --net -- true 2>/dev/null; then
-  python3 scripts/test-binaries.py rtps_loopback calls agents_multiprocess agents_roles agents_pause \
-    < "$work/build.json" > "$work/multicast.tsv"
+  python3 scripts/test-binaries.py --label-suffix " (multicast on lo)" \
+    rtps_loopback calls agents_multiprocess agents_roles agents_pause < "$work/build.json" > "$work/multicast.tsv"
   unshare --net -- bash -c 'set -e; ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo
     ip addr add 198.18.0.1/32 dev lo
-    sed "s/\t\([^\t]*\)$/\t\1 (multicast on lo)/" "$1" | run_tests' bash "$work/multicast.tsv"
+    run_tests < "$1"' bash "$work/multicast.tsv"
 else
   echo "note: not root, unshare/ip missing, or no new network namespace allowed here: the RTPS tests do not run again with multicast on lo" >&2
 fi
