@@ -89,14 +89,19 @@ pub fn run(
             let before = counting.counters()?;
             let label = format!("{} to {receivers} receivers", path.label());
             let unanswered = |error: &anyhow::Error| error.is::<numbering::ProbesUnanswered>();
-            let session = with_restarts(&label, unanswered, |start| match path {
-                PayloadPath::Iceoryx2 => raw::session(experiment, receivers, counting, program, progress),
-                PayloadPath::Transport => lanes::session(experiment, receivers, start, counting, program, progress),
-                PayloadPath::Agents(link) => {
-                    let session = agents::Session { link, receivers, domain, start };
-                    agents::session(experiment, &session, counting, program, progress)
+            let mut reported = 0;
+            let session = with_restarts(&label, unanswered, |start| {
+                let mut new_cells = new_cells(&mut reported, &mut *progress);
+                let progress: &mut dyn FnMut(&str) = &mut new_cells;
+                match path {
+                    PayloadPath::Iceoryx2 => raw::session(experiment, receivers, counting, program, progress),
+                    PayloadPath::Transport => lanes::session(experiment, receivers, start, counting, program, progress),
+                    PayloadPath::Agents(link) => {
+                        let session = agents::Session { link, receivers, domain, start };
+                        agents::session(experiment, &session, counting, program, progress)
+                    }
+                    PayloadPath::Memcpy => Ok(Vec::new()),
                 }
-                PayloadPath::Memcpy => Ok(Vec::new()),
             });
             let (mut session, starts) = session.with_context(|| label.clone())?;
             session.iter_mut().for_each(|cell| cell.session_starts = starts);
@@ -126,6 +131,20 @@ pub fn receiver(path: PayloadPath, domain: u16, prefix: &str, index: u32) -> any
         }
         PayloadPath::Transport => Ok(Some(lanes::receive(prefix, index)?)),
         PayloadPath::Agents(link) => Ok(Some(agents::receive(link, domain, prefix, index)?)),
+    }
+}
+
+/// `progress` for one start of a session: a start measures every size again, so it reports only the cells beyond
+/// those an earlier start of the same session reported (`reported`, updated), and a restarted session's cells are
+/// counted once.
+fn new_cells<'a>(reported: &'a mut usize, progress: &'a mut dyn FnMut(&str)) -> impl FnMut(&str) + 'a {
+    let mut finished = 0;
+    move |label| {
+        finished += 1;
+        if finished > *reported {
+            *reported = finished;
+            progress(label);
+        }
     }
 }
 
@@ -264,6 +283,19 @@ fn collect_reports(helpers: Vec<Helper>) -> Vec<ReceiverReport> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_restarted_session_reports_each_cell_once() {
+        let mut seen = Vec::new();
+        let mut progress = |label: &str| seen.push(label.to_owned());
+        let mut reported = 0;
+        // The first start measures two sizes, then its receivers stop answering; the second measures all three.
+        for labels in [&["16 B", "1 MiB"][..], &["16 B", "1 MiB", "4 MiB"][..]] {
+            let mut start = new_cells(&mut reported, &mut progress);
+            labels.iter().for_each(|label| start(label));
+        }
+        assert_eq!(seen, ["16 B", "1 MiB", "4 MiB"]);
+    }
 
     #[test]
     fn costs_are_per_sample_and_receiver_and_skip_unreadable_receivers() {
