@@ -9,6 +9,8 @@
 # the Python tests with the others.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# run_tests: the test executables listed on standard input, as `cargo test` runs them.
+source scripts/run-tests.sh
 target="${CARGO_TARGET_DIR:-$PWD/target}"
 venv="$target/python-venv"
 
@@ -32,7 +34,6 @@ make_venv() {
 # The workspace's test build (a build of the Python package alone resolves its dependencies' features otherwise
 # and compiles much of the workspace again), then its Python test target.
 run_python_tests() {
-  source scripts/run-tests.sh
   cargo test --workspace --no-run --message-format=json-render-diagnostics \
     | python3 scripts/test-binaries.py python | run_tests
 }

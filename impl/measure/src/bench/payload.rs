@@ -91,8 +91,8 @@ pub fn run(
             let unanswered = |error: &anyhow::Error| error.is::<numbering::ProbesUnanswered>();
             let mut reported = 0;
             let session = with_restarts(&label, unanswered, |start| {
-                let mut new_cells = new_cells(&mut reported, &mut *progress);
-                let progress: &mut dyn FnMut(&str) = &mut new_cells;
+                let mut once = new_cells(&mut reported, &mut *progress);
+                let progress: &mut dyn FnMut(&str) = &mut once;
                 match path {
                     PayloadPath::Iceoryx2 => raw::session(experiment, receivers, counting, program, progress),
                     PayloadPath::Transport => lanes::session(experiment, receivers, start, counting, program, progress),
