@@ -11,7 +11,7 @@ use super::discovery::{DiscoveryState, DiscoveryWatch, Prefix, endpoint_of, pref
 use super::engine::{EngineThread, EngineWatch};
 use super::payload::{OctetsAdapter, Payload, Reader, Writer};
 use super::settings::{
-    RtpsConfig, best_effort_max_bytes, large_qos, qos, qos_with, routable_ipv4_addresses, writer_qos,
+    RtpsConfig, best_effort_max_bytes, channel_qos, large_qos, qos, qos_with, routable_ipv4_addresses, writer_qos,
 };
 use crate::{Channel, EndpointId, TransportError};
 
@@ -97,6 +97,7 @@ impl Generation {
         };
         for channel in Channel::ALL {
             let name = format!("{}_{}", config.topic_prefix, channel.name());
+            let qos = channel_qos(config, channel);
             let (written, read) = topics(&name, &qos)?;
             let reader = reader(&read, &name, &qos)?;
             // A read-only transport writes requests alone (its permissions may grant nothing else).
@@ -258,5 +259,24 @@ mod tests {
             assert!(Instant::now() < deadline, "threads still running after their participants were dropped");
             std::thread::sleep(Duration::from_millis(10));
         }
+    }
+
+    #[test]
+    fn every_reader_caches_what_its_channel_is_given() {
+        let config = RtpsConfig {
+            domain_id: 94,
+            topic_prefix: "reader_caches".into(),
+            reader_cache_samples: 55,
+            sync_cache_samples: 7,
+            large_cache_samples: 9,
+            ..RtpsConfig::default()
+        };
+        let generation = Generation::build(&config, false, &Arc::new(DiscoveryState::default())).unwrap();
+        let cache = |reader: &Reader| reader.qos().resource_limits().map(|limits| limits.max_samples);
+        for (channel, reader) in &generation.reading.readers {
+            let expected = if *channel == Channel::Sync { 7 } else { 55 };
+            assert_eq!(cache(reader), Some(expected), "the reader of {}", channel.name());
+        }
+        assert_eq!(cache(&generation.reading.large), Some(9), "the reader of large updates");
     }
 }

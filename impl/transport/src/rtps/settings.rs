@@ -8,7 +8,6 @@ use rustdds::{QosPolicies, QosPolicyBuilder};
 
 #[cfg(doc)]
 use super::RtpsTransport;
-#[cfg(doc)]
 use crate::Channel;
 
 /// Whether user data to several same-host readers goes out once, as multicast (see the module documentation).
@@ -79,6 +78,14 @@ pub struct RtpsConfig {
     /// written at once to a receiver that handled each in 5 ms: 22 lost of a 16-sample cache, none of a 1,024 one;
     /// none of a 16-sample cache when it handled each in 2 ms). Agents repair such losses by anti-entropy.
     pub large_cache_samples: i32,
+    /// `ResourceLimits::max_samples` of the readers and topic of [`Channel::Sync`] (graph answers, repairs,
+    /// snapshots: each answer to a joiner holds the whole graph). `rustdds` 0.15 keeps a reader's last samples taken
+    /// or not, and an answer written before its addressee's reader matched goes to every reader of the topic (the
+    /// writer's own included), so with the general cache of 1,024 every agent kept the last 1,024 graph answers of
+    /// a graph's joins: about 300 KB more per join while a camera frame was in the graph. A receiving process holds
+    /// up to this many answers; a burst of more before the receiving thread takes them loses the oldest, which the
+    /// asking agent asks for again.
+    pub sync_cache_samples: i32,
     /// Samples the inbox holds before the receiving thread stops taking from the readers.
     pub inbox_capacity: usize,
     /// Largest sample accepted for publishing.
@@ -161,6 +168,7 @@ impl Default for RtpsConfig {
             max_samples: 100_000,
             reader_cache_samples: 1024,
             large_cache_samples: 16,
+            sync_cache_samples: 32,
             inbox_capacity: 65_536,
             max_sample_bytes: 256 << 20,
             large_sample_bytes: 64 << 10,
@@ -189,7 +197,16 @@ pub(super) fn best_effort_max_bytes(config: &RtpsConfig) -> Option<usize> {
 /// The QoS of every topic and reader: reliable, keep-all, volatile, a cache of
 /// [`RtpsConfig::reader_cache_samples`] (a writer's is made from it, with a keep-last history and its send window).
 pub fn qos(config: &RtpsConfig) -> QosPolicies {
-    qos_with(config, Reliability::Reliable { max_blocking_time: config.max_blocking.into() })
+    qos_with(config, reliable(config))
+}
+
+/// The QoS of `channel`'s topic and readers: [`qos`], with a cache of [`RtpsConfig::sync_cache_samples`] for
+/// [`Channel::Sync`].
+pub(super) fn channel_qos(config: &RtpsConfig, channel: Channel) -> QosPolicies {
+    match channel {
+        Channel::Sync => cache_qos(reliable(config), config.sync_cache_samples),
+        _ => qos(config),
+    }
 }
 
 /// The keep-last depth of a reliable writer: besides the samples some matched reader has not acknowledged, it keeps
@@ -230,7 +247,12 @@ pub(super) fn qos_with(config: &RtpsConfig, reliability: Reliability) -> QosPoli
 /// The QoS of the topic of large updates and its readers: [`qos`] with a cache of
 /// [`RtpsConfig::large_cache_samples`].
 pub(super) fn large_qos(config: &RtpsConfig) -> QosPolicies {
-    cache_qos(Reliability::Reliable { max_blocking_time: config.max_blocking.into() }, config.large_cache_samples)
+    cache_qos(reliable(config), config.large_cache_samples)
+}
+
+/// Reliable delivery, a write blocking for up to [`RtpsConfig::max_blocking`] on a full send window.
+fn reliable(config: &RtpsConfig) -> Reliability {
+    Reliability::Reliable { max_blocking_time: config.max_blocking.into() }
 }
 
 fn cache_qos(reliability: Reliability, cache_samples: i32) -> QosPolicies {
@@ -267,5 +289,18 @@ mod tests {
         assert_eq!(large_qos(&config).resource_limits(), Some(large));
         assert!(large_qos(&config).is_reliable());
         assert_eq!(writer_qos(&config, &large_qos(&config)).resource_limits(), Some(window));
+    }
+
+    #[test]
+    fn the_sync_channel_has_a_cache_of_its_own_and_the_other_channels_the_general_one() {
+        let config = RtpsConfig { reader_cache_samples: 55, sync_cache_samples: 7, ..RtpsConfig::default() };
+        let limits =
+            |samples| ResourceLimits { max_samples: samples, max_instances: 1, max_samples_per_instance: samples };
+        for channel in Channel::ALL {
+            let read = channel_qos(&config, channel);
+            let expected = if channel == Channel::Sync { 7 } else { 55 };
+            assert_eq!(read.resource_limits(), Some(limits(expected)), "{}", channel.name());
+            assert_eq!((read.history(), read.reliability()), (qos(&config).history(), qos(&config).reliability()));
+        }
     }
 }
