@@ -29,8 +29,8 @@ pub struct DiscoveryTimes {
     pub reader_matched_ns: PerChannel<Option<u64>>,
 }
 
-/// Most remote readers remembered per channel for directed writes; past it, [`Transport::publish_to`] of an
-/// unremembered peer falls back to a write to every reader.
+/// Most remote readers remembered per channel for directed writes (past it, [`Transport::publish_to`] of an
+/// unremembered peer falls back to a write to every reader), and most peers' reader participants remembered.
 pub(super) const MAX_REMEMBERED_READERS: usize = 4096;
 
 /// A participant's GUID prefix (the first 12 bytes of every GUID of its entities).
@@ -58,7 +58,8 @@ pub(super) struct DiscoveryState {
     pub(super) sync_matches: AtomicU64,
     /// The remote readers each channel's writer has matched (by [`Channel::index`]), for directed writes.
     pub(super) readers: Mutex<PerChannel<Vec<GUID>>>,
-    /// Peers' readers' participants, learnt from their [`READERS_AT`] samples (bounded).
+    /// Peers' readers' participants, learnt from their [`READERS_AT`] samples: at most [`MAX_REMEMBERED_READERS`],
+    /// the oldest forgotten first, and a participant's as soon as discovery reports it lost.
     pub(super) reading_prefixes: Mutex<Vec<(EndpointId, Prefix)>>,
     /// A new remote reader matched this transport's requests writer: tell it where this transport's readers are,
     /// before the next sample this transport publishes.
@@ -89,10 +90,22 @@ impl DiscoveryState {
         };
         let mut known = self.reading_prefixes.lock().unwrap_or_else(|p| p.into_inner());
         known.retain(|(peer, _)| *peer != origin);
-        if known.len() < MAX_REMEMBERED_READERS {
-            known.push((origin, prefix));
+        if known.len() >= MAX_REMEMBERED_READERS {
+            // The oldest goes: peers come and go, and a graph of long-lived agents sees a new one at every restart.
+            known.remove(0);
         }
+        known.push((origin, prefix));
         true
+    }
+
+    /// Forgets the readers of a participant that is gone, and the reader participant it was.
+    fn forget_participant(&self, lost: &[u8]) {
+        let mut readers = self.readers.lock().unwrap_or_else(|p| p.into_inner());
+        for known in readers.iter_mut() {
+            known.retain(|reader| prefix_of(*reader).as_slice() != lost);
+        }
+        drop(readers);
+        self.reading_prefixes.lock().unwrap_or_else(|p| p.into_inner()).retain(|(_, prefix)| prefix.as_slice() != lost);
     }
 }
 
@@ -170,14 +183,38 @@ impl DiscoveryWatch {
                         known.retain(|reader| *reader != guid);
                     }
                 }
-                DomainParticipantStatusEvent::ParticipantLost { id, .. } => {
-                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
-                    for known in readers.iter_mut() {
-                        known.retain(|reader| reader.prefix != id);
-                    }
-                }
+                DomainParticipantStatusEvent::ParticipantLost { id, .. } => self.state.forget_participant(id.as_ref()),
                 _ => {}
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn readers_at(prefix: Prefix) -> Vec<u8> {
+        [READERS_AT.as_slice(), prefix.as_slice()].concat()
+    }
+
+    #[test]
+    fn reader_participants_are_remembered_newest_first_and_forgotten_when_lost() {
+        let state = DiscoveryState::default();
+        let prefix = |n: usize| -> Prefix {
+            let mut prefix = [0; 12];
+            prefix[..8].copy_from_slice(&(n as u64).to_le_bytes());
+            prefix
+        };
+        for n in 0..=MAX_REMEMBERED_READERS {
+            assert!(state.learn_reading_prefix(EndpointId(n as u128), &readers_at(prefix(n))));
+        }
+        let known = |n: usize| state.reading_prefixes.lock().unwrap().contains(&(EndpointId(n as u128), prefix(n)));
+        assert!(!known(0), "past the limit the oldest goes");
+        assert!(known(1) && known(MAX_REMEMBERED_READERS), "the newest are kept");
+        assert_eq!(state.reading_prefixes.lock().unwrap().len(), MAX_REMEMBERED_READERS);
+        state.forget_participant(&prefix(7));
+        assert!(!known(7) && known(8));
+        assert!(!state.learn_reading_prefix(EndpointId(1), b"not a readers-at sample"));
     }
 }
