@@ -27,8 +27,8 @@
 //! once for an operation a gap shows, and a small update that overtook a frame would have the frame sent again.
 //! Large samples on the other channels (graph answers, repairs and snapshots on [`Channel::Sync`], which are rarer)
 //! stay on their channel's topic, but the sync topic's caches keep [`RtpsConfig::sync_cache_samples`] (32): an
-//! answer written before its addressee's reader matched goes to every reader of the topic, and with the general
-//! cache every agent kept the last 1,024 graph answers of its graph's joins, each the whole graph.
+//! answer whose addressee's reader the writing transport does not know yet goes to every reader of the topic, and
+//! with the general cache every agent kept the last 1,024 graph answers of its graph's joins, each the whole graph.
 //!
 //! A receiving thread waits on the readers with `mio` and moves samples into a **bounded inbox**; when the inbox is
 //! full it stops taking, and the readers' caches fill. They do not push back on the writers: a `rustdds` reader
