@@ -356,6 +356,7 @@ impl<T: Transport + 'static> Agent<T> {
             same_host_peers: status.transport.same_host_peers,
             large_values_shared: status.large_values_shared,
             large_values_copied: status.large_values_copied,
+            unaddressed_writes: status.transport.unaddressed_writes,
         }
     }
 

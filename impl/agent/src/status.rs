@@ -184,6 +184,10 @@ pub struct StatusLine {
     /// Large values received that were copied out of their sample.
     #[serde(default)]
     pub large_values_copied: u64,
+    /// Samples meant for one peer that went to every reader, the peer's reader not being known yet
+    /// ([`transport::TransportStats::unaddressed_writes`]).
+    #[serde(default)]
+    pub unaddressed_writes: u64,
 }
 
 /// A command to an agent process, one line on its standard input (`cortex agent --control-stdin`): the other

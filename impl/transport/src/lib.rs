@@ -302,6 +302,12 @@ pub struct TransportStats {
     /// went on. Agents repair the loss.
     #[serde(default)]
     pub large_waits_ended: u64,
+    /// Samples meant for one peer ([`Transport::publish_to`]) that went to every reader instead, because the
+    /// transport did not know that peer's reader yet (RTPS, see [`rtps`], "Memory": on a volatile topic a reader
+    /// matched after the write never gets it, so such a sample reaches its addressee only if the reader had just
+    /// matched). Answers to joiners are whole graphs: this says how often every agent received one it had not asked for.
+    #[serde(default)]
+    pub unaddressed_writes: u64,
 }
 
 /// Atomic counters behind [`TransportStats`].
@@ -316,6 +322,7 @@ pub struct Counters {
     participant_failures: AtomicU64,
     participant_rebuilds: AtomicU64,
     large_waits_ended: AtomicU64,
+    unaddressed_writes: AtomicU64,
 }
 
 impl Counters {
@@ -329,6 +336,11 @@ impl Counters {
     /// Counts `n` waits for a large update that ended without it ([`TransportStats::large_waits_ended`]).
     pub fn large_waits_ended(&self, n: u64) {
         self.large_waits_ended.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// Counts one sample meant for one peer that went to every reader ([`TransportStats::unaddressed_writes`]).
+    pub fn unaddressed_write(&self) {
+        self.unaddressed_writes.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Counts one received sample.
@@ -377,6 +389,7 @@ impl Counters {
             participant_failures: self.participant_failures.load(Ordering::Relaxed),
             participant_rebuilds: self.participant_rebuilds.load(Ordering::Relaxed),
             large_waits_ended: self.large_waits_ended.load(Ordering::Relaxed),
+            unaddressed_writes: self.unaddressed_writes.load(Ordering::Relaxed),
             ..TransportStats::default()
         }
     }

@@ -323,6 +323,9 @@ impl Transport for RtpsTransport {
     fn publish_to(&self, channel: Channel, bytes: Bytes, to: EndpointId) -> Result<(), TransportError> {
         // A peer whose reader discovery has not reported yet gets the sample like everyone else.
         let reader = self.discovery.reader_of(channel, to);
+        if reader.is_none() {
+            self.counters.unaddressed_write();
+        }
         self.write(channel, bytes, reader)
     }
 

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use bytes::Bytes;
 use transport::rtps::{RtpsConfig, RtpsTransport, UpdateDelivery, estimated_wire_bytes};
-use transport::{Channel, Transport, TransportError};
+use transport::{Channel, EndpointId, Transport, TransportError};
 
 fn config(prefix: &str) -> RtpsConfig {
     RtpsConfig { domain_id: 77, topic_prefix: prefix.into(), ..RtpsConfig::default() }
@@ -307,6 +307,12 @@ fn a_directed_sample_reaches_its_peer_alone_and_discovery_is_timed() {
     assert_eq!(next_on(&b, Channel::Sync), Bytes::from_static(b"for b"));
     assert_eq!(next_on(&b, Channel::Sync), Bytes::from_static(b"everyone"));
     assert_eq!(next_on(&c, Channel::Sync), Bytes::from_static(b"everyone"), "a sample directed to b went to c too");
+    assert_eq!(a.stats().unaddressed_writes, 0);
+
+    // A peer whose reader a does not know gets its sample like everyone else, and a counts it.
+    a.publish_to(Channel::Sync, Bytes::from_static(b"for someone unknown"), EndpointId(u128::MAX)).unwrap();
+    assert_eq!(next_on(&c, Channel::Sync), Bytes::from_static(b"for someone unknown"));
+    assert_eq!(a.stats().unaddressed_writes, 1);
 }
 
 #[test]
