@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# How much a long-lived agent's memory grows with the joins of others (README, Status: "Known and not yet fixed").
+# How much a long-lived agent's memory grows with the joins of others (README, Status: "Memory against the joins of
+# others").
 #
 # Starts a camera agent (id 1, a 360,960-byte frame at 20 Hz) and a follower (id 2), then JOINS short-lived agents
 # one after the other (id 11, no state directory, so each is a new participant and a new life: it joins, runs

@@ -2,12 +2,12 @@
 # The project's test command (README: "Run the tests"). Everything a test needs is set up here, so a fresh machine
 # needs no hand work.
 #
-# Builds. Cargo resolves the features of some dependencies (build dependencies and proc-macros among them)
-# according to the targets a command selects, and compiles a crate again for each different set: iceoryx2 and much
-# of the workspace, about a minute each time on two cores. So one test build (`cargo test --workspace --no-run`:
-# libraries, binaries, tests and examples, the Python extension among them) serves every test executable (the
-# Python tests' too), the doc tests and the multicast rerun, and the planted bugs (the mutation switch, a cargo
-# feature a normal build never enables) compile only the crates the switch changes. The criterion benches are not run here: selecting them
+# Builds. Cargo resolves the features of some dependencies (build dependencies and proc-macros among them) according to
+# the targets a command selects, and compiles a crate again for each different set: iceoryx2 and much of the workspace,
+# about a minute each time on two cores. So one test build (`cargo test --workspace --no-run`: libraries, binaries,
+# tests and examples, the Python extension among them) serves every test executable (the Python tests' too), the doc
+# tests and the multicast rerun, and the planted bugs (the mutation switch, a cargo feature a normal build never
+# enables) compile only the crates the switch changes. The criterion benches are not run here: selecting them
 # (`--all-targets`, `--benches`) resolves the other set; clippy (`--all-targets`, in .ci/run) compiles them.
 #
 # Two lanes. Most tests run real processes and wait on them, leaving the machine half idle; the work that only

@@ -303,9 +303,9 @@ pub struct TransportStats {
     #[serde(default)]
     pub large_waits_ended: u64,
     /// Samples meant for one peer ([`Transport::publish_to`]) that went to every reader instead, because the
-    /// transport did not know that peer's reader yet (RTPS, see [`rtps`], "Memory": on a volatile topic a reader
-    /// matched after the write never gets it, so such a sample reaches its addressee only if the reader had just
-    /// matched). Answers to joiners are whole graphs: this says how often every agent received one it had not asked for.
+    /// transport did not know that peer's reader yet (RTPS, see [`rtps`], "Memory"; on a volatile topic a reader
+    /// matched after the write never gets it). Answers to joiners are whole graphs: this says how often every agent
+    /// received one it had not asked for.
     #[serde(default)]
     pub unaddressed_writes: u64,
 }

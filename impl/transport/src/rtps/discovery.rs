@@ -59,7 +59,9 @@ pub(super) struct DiscoveryState {
     /// The remote readers each channel's writer has matched (by [`Channel::index`]), for directed writes.
     pub(super) readers: Mutex<PerChannel<Vec<GUID>>>,
     /// Peers' readers' participants, learnt from their [`READERS_AT`] samples: at most [`MAX_REMEMBERED_READERS`],
-    /// the oldest forgotten first, and a participant's as soon as discovery reports it lost.
+    /// the oldest forgotten first. Not forgotten when discovery loses a participant: a peer sends its sample again
+    /// only when a reader newly matches its writer, and a loss seen by one side alone (a one-way cut past the
+    /// lease) would leave that peer unaddressable.
     pub(super) reading_prefixes: Mutex<Vec<(EndpointId, Prefix)>>,
     /// A new remote reader matched this transport's requests writer: tell it where this transport's readers are,
     /// before the next sample this transport publishes.
@@ -96,16 +98,6 @@ impl DiscoveryState {
         }
         known.push((origin, prefix));
         true
-    }
-
-    /// Forgets the readers of a participant that is gone, and the reader participant it was.
-    fn forget_participant(&self, lost: &[u8]) {
-        let mut readers = self.readers.lock().unwrap_or_else(|p| p.into_inner());
-        for known in readers.iter_mut() {
-            known.retain(|reader| prefix_of(*reader).as_slice() != lost);
-        }
-        drop(readers);
-        self.reading_prefixes.lock().unwrap_or_else(|p| p.into_inner()).retain(|(_, prefix)| prefix.as_slice() != lost);
     }
 }
 
@@ -183,7 +175,12 @@ impl DiscoveryWatch {
                         known.retain(|reader| *reader != guid);
                     }
                 }
-                DomainParticipantStatusEvent::ParticipantLost { id, .. } => self.state.forget_participant(id.as_ref()),
+                DomainParticipantStatusEvent::ParticipantLost { id, .. } => {
+                    let mut readers = self.state.readers.lock().unwrap_or_else(|p| p.into_inner());
+                    for known in readers.iter_mut() {
+                        known.retain(|reader| reader.prefix != id);
+                    }
+                }
                 _ => {}
             }
         }
@@ -199,7 +196,7 @@ mod tests {
     }
 
     #[test]
-    fn reader_participants_are_remembered_newest_first_and_forgotten_when_lost() {
+    fn past_the_limit_the_oldest_reader_participant_is_forgotten_and_the_newest_remembered() {
         let state = DiscoveryState::default();
         let prefix = |n: usize| -> Prefix {
             let mut prefix = [0; 12];
@@ -213,8 +210,10 @@ mod tests {
         assert!(!known(0), "past the limit the oldest goes");
         assert!(known(1) && known(MAX_REMEMBERED_READERS), "the newest are kept");
         assert_eq!(state.reading_prefixes.lock().unwrap().len(), MAX_REMEMBERED_READERS);
-        state.forget_participant(&prefix(7));
-        assert!(!known(7) && known(8));
+        // A peer that sends its sample again is the newest: it outlives the others.
+        assert!(state.learn_reading_prefix(EndpointId(1), &readers_at(prefix(1))));
+        assert!(state.learn_reading_prefix(EndpointId(9999), &readers_at(prefix(9999))));
+        assert!(known(1) && !known(2));
         assert!(!state.learn_reading_prefix(EndpointId(1), b"not a readers-at sample"));
     }
 }
