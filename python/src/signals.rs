@@ -252,6 +252,13 @@ impl SignalHub {
                     };
                     let mut batch = vec![first];
                     batch.extend(receiver.try_iter().take(BATCH - 1));
+                    // The changes of one write reach the queue one by one: read on to the last of them, so that
+                    // they group into one event (bounded: a change dropped at a full queue may have been the last).
+                    while batch.last().is_some_and(|s| !s.last_together) && batch.len() < BATCH {
+                        let Ok(next) = receiver.recv_timeout(Duration::from_millis(50)) else { break };
+                        batch.push(next);
+                        batch.extend(receiver.try_iter().take(BATCH - batch.len()));
+                    }
                     let events = events(&agent, batch);
                     if events.is_empty() || stopping() {
                         continue;

@@ -97,6 +97,9 @@ pub struct ChangeSignal {
     pub origin: Option<AgentId>,
     /// Whether this agent's own operation made it.
     pub local: bool,
+    /// Whether this is the last change of the ones that became visible together (one write, one received delta):
+    /// a subscriber that groups the changes of one write reads on until it has one with this set.
+    pub last_together: bool,
 }
 
 /// A value copy of a visible node.

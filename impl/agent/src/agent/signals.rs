@@ -55,12 +55,15 @@ impl Signals {
         // Held in place for the few callbacks and changes of a usual write (no allocation on the way to them).
         let callbacks: SmallVec<[ChangeCallback; 4]> =
             self.callbacks.lock().unwrap_or_else(|p| p.into_inner()).iter().map(|(_, f)| Arc::clone(f)).collect();
+        let count = changes.len();
         let signals: SmallVec<[ChangeSignal; 2]> = changes
             .into_iter()
-            .map(|event| ChangeSignal {
+            .enumerate()
+            .map(|(index, event)| ChangeSignal {
                 origin: event.origin.map(AgentId::of_replica),
                 local: event.origin.is_some() && event.origin == mine,
                 change: event.change,
+                last_together: index + 1 == count,
             })
             .collect();
         {
