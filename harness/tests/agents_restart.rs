@@ -2,6 +2,8 @@
 //! take the replica id of its previous life, whose operations a paused peer still holds; when that peer resumes,
 //! the two graphs meet. Each life records its incarnation in the state directory before it writes. Also an agent
 //! killed with SIGKILL and restarted while a peer runs: its new life joins the peer's graph under a new replica id.
+//! And an agent killed for good is forgotten by its peer (it no longer stretches the peer's announce interval),
+//! and counts again when it comes back.
 //!
 //! Before the fix the second life took replica 4098 again: its new dots collided with the first life's, which the
 //! paused agent held, and after `SIGCONT` the two digests never met.
@@ -10,6 +12,7 @@ mod common;
 
 use std::time::Duration;
 
+use agent::StatusLine;
 use common::{Agent, converge, seed_nodes, signal, spawn, spawn_seeded};
 
 /// Waits until `agent` is ready with at least `nodes` nodes; returns its replica id.
@@ -88,4 +91,25 @@ fn an_agent_killed_and_restarted_rejoins_the_running_graph_under_a_new_id() {
     let after = ready_replica(&mut again, nodes + 3);
     assert_ne!(before, after, "the restarted life reused replica {before}");
     converge(&mut [&mut again, &mut peer], nodes + 3 + 2);
+}
+
+/// Agent 6 joins the seeded agent 5, is killed with SIGKILL and stays down: agent 5 stops listing it among its peers
+/// once it has been silent for four announce intervals (2 s with the default 500 ms period), and lists it again
+/// when it comes back. Before, an agent kept every peer it had ever heard, and each stretched its announce interval.
+#[test]
+fn an_agent_killed_for_good_is_forgotten_by_its_peer_and_counts_again_when_it_returns() {
+    let (domain, prefix) = (72, format!("forget{}d72", std::process::id()));
+    let nodes = seed_nodes();
+    let mut seeded = spawn_seeded(domain, &prefix);
+    ready_replica(&mut seeded, nodes);
+    let peer = common::join(6, domain, &prefix, &[], nodes);
+    let hears = |ids: &'static [u32]| move |s: &StatusLine| s.peers == ids;
+    seeded.wait_for("hears agent 6", Duration::from_secs(30), hears(&[6]), |_| false);
+
+    signal(&peer.child, "KILL");
+    drop(peer);
+    seeded.wait_for("forgot agent 6", Duration::from_secs(30), hears(&[]), |_| false);
+
+    let _back = common::join(6, domain, &prefix, &[], nodes);
+    seeded.wait_for("hears agent 6 again", Duration::from_secs(30), hears(&[6]), |_| false);
 }

@@ -61,6 +61,10 @@ pub struct AgentsConfig {
     /// agents, each agent stretches its periodic announce to `period × ⌈agents / group⌉` once it has heard its
     /// peers, as the running agents of a large group do.
     pub announce_group: u32,
+    /// Announce intervals of silence after which an agent forgets a peer
+    /// ([`agent::core::ProtocolConfig::peer_forget_intervals`]). The running agents wait 4; the model's default, 1,
+    /// lets the checker's few ticks reach a forgetting, so that the interval's changes with it are checked too.
+    pub peer_forget_intervals: u64,
     /// A planted protocol bug (with the `mutants` feature).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mutant: Option<String>,
@@ -77,6 +81,7 @@ impl Default for AgentsConfig {
             budgets: Budgets { writes: 2, losses: 1, duplicates: 0, crashes: 1, cuts: 1, ticks: 4 },
             history: 2,
             announce_group: agent::config::DEFAULT_ANNOUNCE_GROUP,
+            peer_forget_intervals: 1,
             mutant: None,
             #[cfg(feature = "mutants")]
             planted: None,
@@ -118,6 +123,7 @@ impl AgentsConfig {
             // The running agents' default (8) is more than the model's agents, so every agent announces every
             // period unless the configuration sets a smaller group (`AgentCore::announce_interval_ns`).
             announce_group: self.announce_group,
+            peer_forget_intervals: self.peer_forget_intervals,
             quiet_announce_ns: ANNOUNCE_NS / 4,
             log_limits: LogLimits { max_deltas: self.history, max_payload_bytes: 1 << 20, fold_min_payload_bytes: 0 },
             max_buffered_deltas: 16,
@@ -253,6 +259,8 @@ pub enum Witness {
     GapRequest,
     /// A missing-request was answered with a snapshot.
     SnapshotAnswer,
+    /// An agent forgot a silent peer.
+    PeerForgotten,
 }
 
 /// A step the checker chooses.
@@ -481,7 +489,11 @@ impl AgentsModel {
             return;
         }
         slot.now_ns = slot.now_ns.max(deadline);
+        let heard = core.peers().len();
         let out = core.tick(slot.now_ns);
+        if core.peers().len() < heard {
+            state.witnessed.insert(Witness::PeerForgotten);
+        }
         self.emit(state, index, None, &out);
     }
 
@@ -646,6 +658,9 @@ impl Model for AgentsModel {
             Property::sometimes(properties::W_GAP, |_, s: &AgentsState| s.witnessed.contains(&Witness::GapRequest)),
             Property::sometimes(properties::W_SNAPSHOT, |_, s: &AgentsState| {
                 s.witnessed.contains(&Witness::SnapshotAnswer)
+            }),
+            Property::sometimes(properties::W_FORGOTTEN, |_, s: &AgentsState| {
+                s.witnessed.contains(&Witness::PeerForgotten)
             }),
             Property::sometimes(properties::W_ALONE, |_, s: &AgentsState| s.lives.iter().any(|l| l.alone_beside_ready)),
             Property::sometimes(properties::W_ALL_FAULTS, |model: &AgentsModel, s: &AgentsState| {
@@ -817,6 +832,8 @@ pub mod properties {
     pub const W_GAP: &str = "a gap request goes out";
     /// Witness.
     pub const W_SNAPSHOT: &str = "a missing-request is answered with a snapshot";
+    /// Witness.
+    pub const W_FORGOTTEN: &str = "an agent forgets a silent peer";
     /// Witness.
     pub const W_ALONE: &str = "a life starts alone while another agent is ready";
     /// Witness.

@@ -128,6 +128,10 @@ struct AgentsArgs {
     /// periods once it has heard its peers.
     #[arg(long, default_value_t = agent::config::DEFAULT_ANNOUNCE_GROUP)]
     announce_group: u32,
+    /// Announce intervals of silence after which an agent forgets a peer (running agents: 4; the model's 1 lets
+    /// its few ticks reach a forgetting; 0: never).
+    #[arg(long, default_value_t = 1)]
+    peer_forget_intervals: u64,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -204,6 +208,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
                     ticks: args.ticks,
                 },
                 announce_group: args.announce_group,
+                peer_forget_intervals: args.peer_forget_intervals,
                 ..Default::default()
             };
             if let Some(address) = args.common.explore {

@@ -312,7 +312,7 @@ impl<T: Transport + 'static> Agent<T> {
             call_replies_dropped: self.inner.service.dropped.load(Ordering::Relaxed),
             late_call_replies: self.inner.calls.late.load(Ordering::Relaxed),
             calls_in_flight: self.inner.calls.in_flight(),
-            peers: core.peers().iter().copied().collect(),
+            peers: core.peers().collect(),
             nodes: core.replica().map_or(0, Replica::node_count),
             edges: core.replica().map_or(0, Replica::edge_count),
             transport: self.inner.transport.stats(),
@@ -570,7 +570,7 @@ impl<T: Transport> Inner<T> {
                             path.display()
                         );
                     }
-                    let heard = locked.core.peers();
+                    let heard: Vec<AgentId> = locked.core.peers().collect();
                     if *alone && heard.is_empty() {
                         tracing::info!("{me}: no peer answered within {:?}; started alone", self.config.join_wait);
                     } else if *alone {
@@ -659,7 +659,7 @@ impl<T: Transport> Inner<T> {
                     let admitted = locked.core.admit(graph, message.from(), message.kind(), &mut out);
                     self.report(&mut locked, &out.events, &origin);
                     if admitted {
-                        locked.core.heard_from(message.from());
+                        locked.core.heard_from(message.from(), received_ns);
                     }
                     admitted
                 };

@@ -117,6 +117,7 @@ impl AgentConfig {
             join_retry_ns: self.join_retry.as_nanos() as u64,
             announce_period_ns: self.announce_period.as_nanos() as u64,
             announce_group: self.announce_group,
+            peer_forget_intervals: crate::core::PEER_FORGET_INTERVALS,
             quiet_announce_ns: self.quiet_announce.as_nanos() as u64,
             log_limits: self.log_limits,
             max_buffered_deltas: self.max_buffered_deltas,

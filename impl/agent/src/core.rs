@@ -52,8 +52,8 @@ use lives::reused_id;
 pub use input::{Decoded, Input};
 pub use output::{Dest, Event, Output, Send, WriteRefusal, Written};
 pub use settings::{
-    INCARNATION_LIMIT, LifeSeed, MAX_ANSWERED, MAX_FOREIGN_GRAPHS, ProtocolConfig, RANDOM_FLOOR_LIMIT,
-    SNAPSHOT_IF_SMALLER_ABOVE_BYTES,
+    INCARNATION_LIMIT, LifeSeed, MAX_ANSWERED, MAX_FOREIGN_GRAPHS, PEER_FORGET_INTERVALS, ProtocolConfig,
+    RANDOM_FLOOR_LIMIT, SNAPSHOT_IF_SMALLER_ABOVE_BYTES,
 };
 
 /// model checker's states do not multiply by them (caches, a seed graph consumed once).
@@ -109,7 +109,8 @@ pub struct AgentCore {
     announced: Option<CausalContext>,
     /// The outstanding missing-request: the peer asked and when.
     pending_ask: Option<(AgentId, u64)>,
-    peers: BTreeSet<AgentId>,
+    /// The agents heard from lately, with when each was last heard (see [`ProtocolConfig::peer_forget_intervals`]).
+    peers: BTreeMap<AgentId, u64>,
     /// Graph requests answered recently, by (joiner, nonce), with the time.
     answered: BTreeMap<(AgentId, u64), u64>,
     /// Whether the replica queues its visible changes for [`Output::changes`] (on unless turned off).
@@ -139,7 +140,7 @@ impl AgentCore {
             unannounced_write_ns: None,
             announced: None,
             pending_ask: None,
-            peers: BTreeSet::new(),
+            peers: BTreeMap::new(),
             answered: BTreeMap::new(),
             change_tracking: true,
             seed: Unhashed(seed),
@@ -256,14 +257,28 @@ impl AgentCore {
         self.collision.as_deref()
     }
 
-    /// Notes a message from `from` that is not the protocol's (a remote call).
-    pub fn heard_from(&mut self, from: AgentId) {
-        self.peers.insert(from);
+    /// Notes a message from `from` at `now_ns` that is not the protocol's (a remote call).
+    pub fn heard_from(&mut self, from: AgentId, now_ns: u64) {
+        self.peers.insert(from, now_ns);
     }
 
-    /// The agents heard from.
-    pub fn peers(&self) -> &BTreeSet<AgentId> {
-        &self.peers
+    /// The agents heard from lately, by id: each is forgotten at the first tick after it has been silent for
+    /// [`ProtocolConfig::peer_forget_intervals`] of this agent's announce intervals.
+    pub fn peers(&self) -> impl ExactSizeIterator<Item = AgentId> + '_ {
+        self.peers.keys().copied()
+    }
+
+    /// Forgets the peers silent for [`ProtocolConfig::peer_forget_intervals`] announce intervals at `now_ns`: an
+    /// agent that left (or a life that ended) no longer counts in [`AgentCore::announce_interval_ns`] nor in
+    /// [`AgentCore::peers`]. A live peer announces at least once an interval (its own, the same as this agent's when
+    /// both hear the same group), so only a long silence — a departure, a cut, a pause — forgets it; its next message
+    /// brings it back.
+    fn forget_silent_peers(&mut self, now_ns: u64) {
+        if self.config.peer_forget_intervals == 0 {
+            return;
+        }
+        let silence_ns = self.announce_interval_ns().saturating_mul(self.config.peer_forget_intervals);
+        self.peers.retain(|_, heard_ns| now_ns.saturating_sub(*heard_ns) < silence_ns);
     }
 
     /// When this life started joining.
@@ -356,6 +371,7 @@ impl AgentCore {
             }
             return out;
         }
+        self.forget_silent_peers(now_ns);
         if self.config.read_only {
             return out;
         }
@@ -388,8 +404,8 @@ impl AgentCore {
     }
 
     /// The time between this agent's periodic announces: the announce period, times the number of groups of
-    /// [`ProtocolConfig::announce_group`] agents among this one and the peers heard, so a group of any size sends
-    /// about `announce_group` announces per period.
+    /// [`ProtocolConfig::announce_group`] agents among this one and the peers heard lately ([`AgentCore::peers`]),
+    /// so a group of any size sends about `announce_group` announces per period.
     pub fn announce_interval_ns(&self) -> u64 {
         let group = u64::from(self.config.announce_group);
         if group == 0 {
@@ -408,7 +424,7 @@ impl AgentCore {
         }
         // Admitted: `graph` is this life's, or any while joining without one (then a graph request may carry none).
         let tag = graph.or(self.graph).map(|graph| (graph, input.from()));
-        self.peers.insert(input.from());
+        self.peers.insert(input.from(), now_ns);
         match input {
             Input::Delta { from, delta } => {
                 self.gap_request(from, &delta, now_ns, &mut out);

@@ -99,7 +99,8 @@ pub struct AgentStatus {
     pub late_call_replies: u64,
     /// This agent's calls waiting for replies now.
     pub calls_in_flight: usize,
-    /// Peers heard from, by agent id.
+    /// Peers heard from lately, by agent id (forgotten after `agent::core::PEER_FORGET_INTERVALS` announce intervals
+    /// of silence).
     pub peers: Vec<AgentId>,
     /// Visible nodes.
     pub nodes: usize,
@@ -144,7 +145,8 @@ pub struct StatusLine {
     pub edges: usize,
     /// The visible graph's digest (the first 8 bytes, hex), once ready.
     pub digest: Option<String>,
-    /// Peers heard from, by agent id.
+    /// Peers heard from lately, by agent id (forgotten after `agent::core::PEER_FORGET_INTERVALS` announce intervals
+    /// of silence).
     pub peers: Vec<u32>,
     /// Samples rejected (foreign, malformed, or refused by the replica).
     pub rejected: u64,

@@ -202,20 +202,60 @@ fn announce_times(core: &mut AgentCore, from_ns: u64, until_ns: u64) -> Vec<u64>
     times
 }
 
+/// Delivers to `to` at `now_ns` an announce of each of `peers` (group `group`).
+fn announces_of(peers: std::ops::RangeInclusive<u32>, group: u32, now_ns: u64, to: &mut AgentCore) {
+    for peer in peers {
+        for send in announcer(peer, group).tick(1).sends {
+            let envelope = Envelope::decode(&send.encode()).unwrap();
+            if let Some(input) = Input::decode(envelope.message).input {
+                to.handle(now_ns, envelope.graph, input);
+            }
+        }
+    }
+}
+
 #[test]
 fn an_agent_that_hears_more_agents_than_its_group_announces_less_often_in_proportion() {
     let mut core = announcer(1, 4);
     assert_eq!(core.announce_interval_ns(), 100_000_000, "alone: the announce period");
     // Eleven peers are heard (their announces): twelve agents, three groups of four.
-    for peer in 2..=12 {
-        let sends = announcer(peer, 4).tick(1).sends;
-        deliver(&sends, &mut core);
-    }
+    announces_of(2..=12, 4, 1, &mut core);
     assert_eq!(core.peers().len(), 11);
     assert_eq!(core.announce_interval_ns(), 300_000_000);
-    let times = announce_times(&mut core, 1_000_000_000, 2_000_000_000);
+    // The peers go on announcing, once an interval each.
+    let mut times = Vec::new();
+    let mut now = 1_000_000_000;
+    while now <= 2_000_000_000 {
+        announces_of(2..=12, 4, now, &mut core);
+        times.extend(announce_times(&mut core, now, now + 299_999_999));
+        now += 300_000_000;
+    }
     let gaps: Vec<u64> = times.windows(2).map(|w| w[1] - w[0]).collect();
     assert!(!gaps.is_empty() && gaps.iter().all(|&gap| gap == 300_000_000), "{times:?}");
+    assert_eq!(core.peers().len(), 11, "peers that announce are not forgotten");
+}
+
+#[test]
+fn peers_silent_for_four_announce_intervals_are_forgotten_and_no_longer_stretch_the_interval() {
+    let mut core = announcer(1, 4);
+    announces_of(2..=12, 4, 1, &mut core);
+    assert_eq!(core.announce_interval_ns(), 300_000_000);
+    // Peers 2 and 3 go on announcing; the other nine leave. Four intervals of 300 ms after their last word they
+    // still count; at the first announce after that they are forgotten.
+    let mut now = 300_000_000;
+    while now <= 1_200_000_000 {
+        announces_of(2..=3, 4, now, &mut core);
+        core.tick(now);
+        now += 100_000_000;
+    }
+    assert_eq!(core.peers().len(), 11, "silent for four intervals: still counted");
+    announces_of(2..=3, 4, 1_500_000_001, &mut core);
+    core.tick(1_500_000_001);
+    assert_eq!(core.peers().collect::<Vec<_>>(), [AgentId(2), AgentId(3)]);
+    assert_eq!(core.announce_interval_ns(), 100_000_000, "three agents: one group, the announce period");
+    // One that comes back counts again.
+    announces_of(4..=4, 4, 1_600_000_000, &mut core);
+    assert_eq!(core.peers().len(), 3);
 }
 
 #[test]
@@ -270,7 +310,8 @@ fn a_delta_of_another_graph_is_refused_counted_and_reported_once_per_foreign_gra
     assert_eq!(foreign_events(&events), [GraphId::new(0xb).unwrap(), GraphId::new(0xc).unwrap()], "{events:?}");
     assert_eq!(a.foreign_refused(), 6);
     assert_eq!(a.replica().unwrap().digest(), before, "nothing of a foreign graph was merged");
-    assert!(a.peers().is_empty(), "agents of other graphs are not peers: {:?}", a.peers());
+    let peers: Vec<AgentId> = a.peers().collect();
+    assert!(peers.is_empty(), "agents of other graphs are not peers: {peers:?}");
 }
 
 #[test]

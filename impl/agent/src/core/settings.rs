@@ -16,6 +16,10 @@ pub const RANDOM_FLOOR_LIMIT: u32 = 1 << 16;
 /// written together with a pose, and the next frame written alone, keeps the earlier frame), a snapshot only the
 /// current ones.
 pub const SNAPSHOT_IF_SMALLER_ABOVE_BYTES: usize = 1 << 20;
+/// The running agents' [`ProtocolConfig::peer_forget_intervals`]: peers that hear the same group announce once an
+/// interval each; four leave room for lost announces and for a peer whose interval is longer, since it heard more
+/// agents lately.
+pub const PEER_FORGET_INTERVALS: u64 = 4;
 /// Most foreign graph ids remembered (each reported once); messages of further ones are refused and counted without
 /// a report.
 pub const MAX_FOREIGN_GRAPHS: usize = 64;
@@ -35,10 +39,15 @@ pub struct ProtocolConfig {
     pub join_retry_ns: u64,
     /// How often to announce the applied operations while the group is small (see `announce_group`).
     pub announce_period_ns: u64,
-    /// The number of agents whose announces fit in one announce period: with more agents heard, each announces
-    /// less often, in proportion, so the group as a whole sends about this many announces per period whatever
-    /// its size (0: every agent announces every period, however many there are).
+    /// The number of agents whose announces fit in one announce period: with more agents heard lately, each
+    /// announces less often, in proportion, so the group as a whole sends about this many announces per period
+    /// whatever its size (0: every agent announces every period, however many there are). Agents that left stop
+    /// counting after `peer_forget_intervals` intervals of silence.
     pub announce_group: u32,
+    /// A peer silent for this many of this agent's announce intervals is forgotten ([`super::AgentCore::peers`]),
+    /// so agents that left stop stretching the announce interval of those that stay (running agents:
+    /// [`PEER_FORGET_INTERVALS`]; 0: never forgotten).
+    pub peer_forget_intervals: u64,
     /// Announce once more this long after the last local write (0: never).
     pub quiet_announce_ns: u64,
     /// History kept for anti-entropy.
