@@ -169,8 +169,9 @@ pub struct EpisodeResult {
     /// When it healed.
     pub heal_ms: f64,
     /// Milliseconds from the heal until every running agent heard every other one (a new life's peers discovered;
-    /// `None`: not within the settle time). Agents keep hearing each other through most faults, so this is near 0
-    /// except after a restart or a late join.
+    /// `None`: not within the settle time). Agents keep hearing each other through short faults, so this is near 0
+    /// after them; after a restart, a late join, or a cut or pause longer than four announce intervals (after which
+    /// an agent forgets a silent peer, 2 s by default) it is the time until they hear each other again.
     pub heal_to_heard_ms: Option<f64>,
     /// Milliseconds from the heal until every running agent showed the same graph (`None`: not within the settle
     /// time).
