@@ -241,7 +241,7 @@ fn peers_silent_for_four_announce_intervals_are_forgotten_and_no_longer_stretch_
     announces_of(2..=12, 4, 1, &mut core);
     assert_eq!(core.announce_interval_ns(), 300_000_000);
     // Peers 2 and 3 go on announcing; the other nine leave. Four intervals of 300 ms after their last word they
-    // still count; at the first announce after that they are forgotten.
+    // still count; at the first tick after that they are forgotten.
     let mut now = 300_000_000;
     while now <= 1_200_000_000 {
         announces_of(2..=3, 4, now, &mut core);
