@@ -137,6 +137,15 @@ pub enum TransportError {
         /// The channel name.
         channel: &'static str,
     },
+    /// One of the DDS engine's threads ended while the transport built its participants, writers and readers
+    /// (`rustdds` 0.15 ends a participant's event loop when its `poll` fails, as it does when the process resumes
+    /// after a SIGSTOP); the build was abandoned before asking the ended thread for anything.
+    #[error("rtps setup: rustdds's {thread} ended while the transport was being built (a SIGSTOP/SIGCONT?)")]
+    EngineEnded {
+        /// Which thread: its name (quoted), or how many of a new participant's threads were gone before they were
+        /// seen.
+        thread: String,
+    },
     /// The transport was closed.
     #[error("transport closed")]
     Closed,

@@ -112,7 +112,15 @@
 //! ones; a failed rebuild is logged and tried again, at most one rebuild a second. The transport's endpoint id changes
 //! (the new publishing participant's GUID prefix), peers discover it like a new process, [`Transport::sync_matches`]
 //! grows with the new matches (a joining agent asks for the graph again), and what was written in the gap is repaired
-//! by the agents' anti-entropy. [`TransportStats`] counts failures and rebuilds. Peers keep the dead participant's
+//! by the agents' anti-entropy. [`TransportStats`] counts failures and rebuilds. A stop and resume *during* a build
+//! (at start, or a rebuild) ends the new participants' threads before their writers and readers are handed to them,
+//! and `rustdds` then deadlocks in `create_datawriter` (the hand-over fails and the new writer is dropped while its
+//! publisher's lock is held): a process stopped in its first 100 ms hung for good. A build now looks at its threads
+//! before each writer and reader and gives up on the first ended one ([`TransportError::EngineEnded`]). A stop that
+//! lands inside a creation still deadlocks it (in `rustdds`'s own participant creation too), so a build runs on a
+//! thread of its own and is given up 2 s after one of its threads ended, or after 30 s in any case (its thread and
+//! participants are left behind, silent); the start builds again at once, up to five times in all, and a rebuild is
+//! retried as any failed rebuild is. Peers keep the dead participant's
 //! readers matched until its lease runs out (50 s in `rustdds` 0.15), so meanwhile their pacing of large samples waits
 //! in vain for those readers' acknowledgements (up to [`RtpsConfig::max_blocking`] per [`RtpsConfig::pace_bytes`]), as
 //! it does for any peer that vanished without leaving. Where `/proc/self/task` does not exist (not Linux) the threads
@@ -224,7 +232,7 @@ impl RtpsTransport {
     pub fn new(config: RtpsConfig) -> Result<Self, TransportError> {
         let multicast = config.multicast.resolve();
         let discovery = Arc::new(DiscoveryState::default());
-        let generation = Generation::build(&config, multicast, &discovery)?;
+        let generation = Generation::first(&config, multicast, &discovery)?;
         discovery.times.lock().unwrap_or_else(|p| p.into_inner()).created_ns = SystemClock.now_ns();
         let Generation { writers, best_effort, large, local, reading_prefix, participants, reading } = generation;
         let shared = Arc::new(Shared {

@@ -2,7 +2,10 @@
 //! creates them at start and the receiving thread creates them again at every rebuild (see the parent module's
 //! documentation, "Recovery").
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::RecvTimeoutError;
 
 use rustdds::policy::Reliability;
 use rustdds::{DomainParticipant, DomainParticipantBuilder, QosPolicies, RTPSEntity, Topic, TopicKind};
@@ -57,12 +60,80 @@ fn setup(what: impl Into<String>) -> impl FnOnce(rustdds::dds::CreateError) -> T
 impl Generation {
     /// Joins the DDS domain with new participants and creates every topic, writer and reader in them (see
     /// [`RtpsTransport::new`]); `state` is where the new readers' discovery events are recorded.
+    ///
+    /// The build runs on a thread of its own, which this one waits for. A stop and resume of the process while
+    /// `rustdds` hands a new writer or reader to its participant's event loop ends that thread and deadlocks the
+    /// hand-over (see `build_here`); a build that has not ended [`DEADLOCKED_AFTER`] after one of its participants'
+    /// threads did is given up as [`TransportError::EngineEnded`], and its thread and participants are left behind
+    /// (silent: their event loop has ended).
     pub(super) fn build(
         config: &RtpsConfig,
         multicast: bool,
         state: &Arc<DiscoveryState>,
     ) -> Result<Generation, TransportError> {
+        let (sender, built) = crossbeam_channel::bounded(1);
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let (config, state, seen_there) = (config.clone(), Arc::clone(state), Arc::clone(&seen));
+        std::thread::Builder::new()
+            .name("rtps-build".into())
+            .spawn(move || {
+                let _ = sender.send(Generation::build_here(&config, multicast, &state, &seen_there));
+            })
+            .map_err(|e| TransportError::Setup { what: "the RTPS build thread".into(), detail: e.to_string() })?;
+        let (started, mut ended) = (Instant::now(), None::<(String, Instant)>);
+        loop {
+            match built.recv_timeout(BUILD_LOOK_PERIOD) {
+                Ok(result) => return result,
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(TransportError::Setup { what: "the RTPS build".into(), detail: "it panicked".into() });
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+            }
+            let threads = seen.lock().unwrap_or_else(|p| p.into_inner());
+            match (&ended, threads.iter().find(|thread| !thread.alive())) {
+                (None, Some(thread)) => ended = Some((format!("{:?}", thread.name), Instant::now())),
+                (Some((thread, at)), _) if at.elapsed() >= DEADLOCKED_AFTER => {
+                    tracing::error!(
+                        "rtps: the transport's build is stuck in rustdds since its thread {thread} ended (a \
+                         SIGSTOP/SIGCONT during the build); giving it up, and leaving its thread and participants \
+                         behind"
+                    );
+                    return Err(TransportError::EngineEnded { thread: thread.clone() });
+                }
+                _ if started.elapsed() >= GIVE_UP_AFTER => {
+                    tracing::error!(
+                        "rtps: the transport's build has not ended after {GIVE_UP_AFTER:?} (stuck in rustdds, whose \
+                         threads ended before they could be watched?); giving it up"
+                    );
+                    return Err(TransportError::Setup {
+                        what: "the RTPS build".into(),
+                        detail: format!("no result after {GIVE_UP_AFTER:?}"),
+                    });
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// [`Generation::build`]'s work, on the calling thread; the new participants' `rustdds` threads are put in
+    /// `seen` as soon as they are known.
+    fn build_here(
+        config: &RtpsConfig,
+        multicast: bool,
+        state: &Arc<DiscoveryState>,
+        seen: &Mutex<Vec<EngineThread>>,
+    ) -> Result<Generation, TransportError> {
         let (publishing, subscribing, engine) = join_domain(config, multicast)?;
+        seen.lock().unwrap_or_else(|p| p.into_inner()).clone_from(&engine);
+        // Every writer and reader is handed to its participant's event loop. If that thread has ended (a SIGSTOP
+        // and SIGCONT during the build end it), rustdds 0.15 fails the hand-over and then, dropping the new entity
+        // while it still holds the publisher's or subscriber's lock, deadlocks. So the build looks at the engine's
+        // threads before each creation and gives up as soon as one has ended; the caller builds again. A stop that
+        // lands inside a creation still deadlocks it: `build` gives such a build up.
+        let running = || match engine.iter().find(|thread| !thread.alive()) {
+            Some(thread) => Err(TransportError::EngineEnded { thread: format!("{:?}", thread.name) }),
+            None => Ok(()),
+        };
         let qos = qos(config);
         let publisher = publishing.create_publisher(&qos).map_err(setup("publisher"))?;
         let subscriber =
@@ -86,11 +157,13 @@ impl Generation {
         };
         // A writer's QoS is its topic's with a keep-last history and its own send window (`writer_qos`).
         let writer = |topic: &Topic, name: &str, qos: &QosPolicies| {
+            running()?;
             publisher
                 .create_datawriter_no_key::<Payload, OctetsAdapter>(topic, Some(writer_qos(config, qos)))
                 .map_err(setup(format!("writer of {name}")))
         };
         let reader = |topic: &Topic, name: &str, qos: &QosPolicies| {
+            running()?;
             subscriber
                 .create_simple_datareader_no_key::<Payload, OctetsAdapter>(topic, Some(qos.clone()))
                 .map_err(setup(format!("reader of {name}")))
@@ -162,6 +235,45 @@ impl Generation {
     }
 }
 
+/// How long a build may go on after one of its participants' `rustdds` threads has ended before it is taken for
+/// deadlocked ([`Generation::build`]): a build whose engine has ended fails or finishes within microseconds.
+const DEADLOCKED_AFTER: Duration = Duration::from_secs(2);
+/// How long a build may take at all before it is given up ([`Generation::build`]): a build takes well under a
+/// second, and `rustdds` itself gives up waiting for a new participant's discovery thread after 10 s.
+const GIVE_UP_AFTER: Duration = Duration::from_secs(30);
+/// How often the waiting thread looks at the build's `rustdds` threads.
+const BUILD_LOOK_PERIOD: Duration = Duration::from_millis(50);
+
+/// Builds attempted at start ([`Generation::first`]).
+const FIRST_BUILD_ATTEMPTS: u32 = 5;
+
+impl Generation {
+    /// The first generation, at the transport's start. A build that fails is tried again with new participants, at
+    /// most [`FIRST_BUILD_ATTEMPTS`] times in all: a stop and resume of the process during a build ends `rustdds`'s
+    /// threads, which fails it in many ways ([`TransportError::EngineEnded`], a participant whose discovery thread
+    /// could not start, a build given up), and nothing but building again tells those from a lasting cause, which
+    /// then fails every attempt alike. (Later builds are the receiving thread's rebuilds, which retry any failure.)
+    pub(super) fn first(
+        config: &RtpsConfig,
+        multicast: bool,
+        state: &Arc<DiscoveryState>,
+    ) -> Result<Generation, TransportError> {
+        let mut attempt = 1;
+        loop {
+            match Generation::build(config, multicast, state) {
+                Err(error) if attempt < FIRST_BUILD_ATTEMPTS => {
+                    tracing::warn!(
+                        "rtps: building the transport failed (attempt {attempt} of {FIRST_BUILD_ATTEMPTS}): {error}; \
+                         building it again with new participants"
+                    );
+                    attempt += 1;
+                }
+                built => return built,
+            }
+        }
+    }
+}
+
 /// Creates this generation's participants (the subscribing one only when the readers live apart, see
 /// [`RtpsConfig::separate_reader_participant`]), and finds the threads `rustdds` started for them.
 fn join_domain(
@@ -193,6 +305,13 @@ fn join_domain(
     let (publishing, subscribing) = created?;
     let engine = watch.into_threads();
     let participants = 1 + usize::from(subscribing.is_some());
+    if engine.len() < 2 * participants && std::fs::read_dir("/proc/self/task").is_ok() {
+        // Threads are watched here, yet some of the new participants' threads were gone before they could be seen
+        // (a stop and resume while the participants were being created).
+        return Err(TransportError::EngineEnded {
+            thread: format!("{} of the {} new threads", 2 * participants - engine.len(), 2 * participants),
+        });
+    }
     if engine.len() != 2 * participants {
         tracing::warn!(
             "rtps: found {} rustdds threads for {participants} new participant(s), expected {}: a participant \
