@@ -67,3 +67,30 @@ fn an_agent_recovers_from_a_long_pause_and_from_a_second_one() {
     let mut writer = join(7, domain, &prefix, &["--insert-nodes", "3"], nodes);
     converge(&mut [&mut seeded, &mut writer], nodes + 3);
 }
+
+/// A joiner stopped while it joins, for longer than its whole join wait (2 s, the default): when it resumes it must
+/// still take the running graph, not start alone. Two faults met here: a stop during the transport's build
+/// deadlocked `rustdds` (the process hung for good, before printing a status), and a stop during the join wait
+/// counted against it, so the resumed joiner started alone at once with a graph of its own, which never merges.
+/// Where a stop lands depends on the machine's speed: with the release build on the project's 2-core VM, stops 40–55
+/// ms after the spawn met the first (in some runs) and stops 80–120 ms after it the second; the debug build these
+/// tests run starts more slowly, so three stops are spread over its start.
+#[test]
+fn a_joiner_stopped_while_it_joins_takes_the_running_graph_when_it_resumes() {
+    let prefix = format!("pause_j{}", std::process::id());
+    let domain = 71;
+    let nodes = seed_nodes();
+    let mut seeded = spawn_seeded(domain, &prefix);
+    seeded.wait_ready_with(nodes);
+    for (id, stop_after_ms) in [(11, 50), (12, 150), (13, 400)] {
+        let mut joiner = common::spawn(id, domain, &prefix, &[]);
+        std::thread::sleep(Duration::from_millis(stop_after_ms));
+        pause(&joiner, Duration::from_secs(3));
+        joiner.wait_for(
+            &format!("joined with {nodes} nodes after a stop {stop_after_ms} ms into its start (not alone)"),
+            Duration::from_secs(60),
+            |s| s.ready && s.nodes == nodes,
+            |s| s.ready && s.nodes != nodes,
+        );
+    }
+}

@@ -281,9 +281,23 @@ impl AgentCore {
         self.peers.retain(|_, heard_ns| now_ns.saturating_sub(*heard_ns) < silence_ns);
     }
 
-    /// When this life started joining.
+    /// When this life started joining, moved later by the time it could not listen (see `discount_absence`): the
+    /// join wait runs from here.
     pub fn joining_since_ns(&self) -> u64 {
         self.joining_since_ns
+    }
+
+    /// A joining life ticks at its next graph request, one join retry after the last (the first at once). A tick
+    /// more than a further join retry late finds a life that could not listen meanwhile — its process was stopped
+    /// (SIGSTOP, a debugger) or starved of the CPU — so that time does not count against the join wait: the life
+    /// asks again and waits out the rest, instead of starting alone at once beside peers it had no chance to hear
+    /// (a graph of its own that, unnamed, never merges with theirs).
+    fn discount_absence(&mut self, now_ns: u64) {
+        let due = self.last_request_ns.map_or(self.joining_since_ns, |at| at.saturating_add(self.config.join_retry_ns));
+        let late_ns = now_ns.saturating_sub(due);
+        if late_ns > self.config.join_retry_ns {
+            self.joining_since_ns = self.joining_since_ns.saturating_add(late_ns);
+        }
     }
 
     /// When the last graph request went out (while joining).
@@ -354,6 +368,7 @@ impl AgentCore {
     fn tick_unstamped(&mut self, now_ns: u64) -> Output {
         let mut out = Output::default();
         if self.replica.is_none() {
+            self.discount_absence(now_ns);
             if now_ns.saturating_sub(self.joining_since_ns) >= self.config.join_wait_ns && !self.config.read_only {
                 self.become_ready(now_ns, None, &mut out);
             } else {

@@ -358,8 +358,11 @@ fn a_joiner_that_names_a_graph_is_not_answered_by_another_graph_and_starts_it_al
     let answer = exchange(&request.sends, &mut a, 2);
     assert!(answer.sends.is_empty(), "{:?}", answer.sends);
     assert_eq!(foreign_events(&answer.events), [GraphId::new(0xb).unwrap()]);
-    let out = joiner.tick(6_000_000_000);
-    assert!(joiner.is_ready());
+    let mut out = Output::default();
+    while !joiner.is_ready() {
+        let now = joiner.next_deadline_ns();
+        out = joiner.tick(now);
+    }
     assert!(
         out.events
             .iter()
@@ -370,7 +373,35 @@ fn a_joiner_that_names_a_graph_is_not_answered_by_another_graph_and_starts_it_al
 #[test]
 fn a_life_that_starts_alone_naming_no_graph_creates_one_with_an_id_from_its_nonce() {
     let mut joiner = joiner(5, 77, None);
-    joiner.tick(6_000_000_000);
+    let ready_ns = tick_until_ready(&mut joiner);
+    assert_eq!(ready_ns, 5_000_000_000, "alone once the 5 s join wait is over");
+    assert_eq!(joiner.graph(), Some(GraphId::from_nonce(77)));
+}
+
+/// Ticks `core` at each of its deadlines until it is ready; returns when it became ready.
+fn tick_until_ready(core: &mut AgentCore) -> u64 {
+    let mut now = 0;
+    while !core.is_ready() {
+        now = core.next_deadline_ns().max(now);
+        core.tick(now);
+    }
+    now
+}
+
+#[test]
+fn a_joiner_stopped_while_it_joins_asks_again_when_it_resumes_and_starts_alone_only_after_the_rest_of_its_wait() {
+    let mut joiner = joiner(5, 77, None);
+    let requests =
+        |out: &Output| out.sends.iter().filter(|s| matches!(s.message, Message::GraphRequest { .. })).count();
+    assert_eq!(requests(&joiner.tick(0)), 1);
+    assert_eq!(requests(&joiner.tick(200_000_000)), 1);
+    // Stopped for 10 s (its next tick was due at 0.4 s): longer than its 5 s join wait, yet it heard nothing in it.
+    let resumed = joiner.tick(10_400_000_000);
+    assert!(!joiner.is_ready(), "a stopped joiner must not start alone the moment it resumes");
+    assert_eq!(requests(&resumed), 1, "it asks again at once");
+    // It had listened for 0.4 s before the stop: ticking at its deadlines, it starts alone 4.6 s after the
+    // resume.
+    assert_eq!(tick_until_ready(&mut joiner), 15_000_000_000);
     assert_eq!(joiner.graph(), Some(GraphId::from_nonce(77)));
 }
 
