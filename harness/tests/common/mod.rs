@@ -178,6 +178,17 @@ impl Agent {
         )
     }
 
+    /// Waits (at most `within`) until the agent is ready with at least `nodes` nodes taken from its peers; one that
+    /// is ready with fewer before it received anything (it started alone) fails the test at once.
+    pub fn wait_joined(&mut self, nodes: usize, within: Duration) {
+        self.wait_for(
+            &format!("joined with at least {nodes} nodes (not alone)"),
+            within,
+            |s| s.ready && s.nodes >= nodes,
+            |s| s.ready && s.nodes < nodes && s.samples_received == 0,
+        );
+    }
+
     /// The latest count of samples received.
     pub fn samples_received(&mut self) -> u64 {
         self.latest().map_or(0, |s| s.samples_received)
@@ -188,12 +199,7 @@ impl Agent {
 /// is ready without the expected nodes (it started alone) fails the test at once.
 pub fn join(id: u32, domain: u16, prefix: &str, extra: &[&str], nodes: usize) -> Agent {
     let mut joiner = spawn(id, domain, prefix, &[&["--join-wait-ms", "20000"], extra].concat());
-    joiner.wait_for(
-        &format!("joined with at least {nodes} nodes (not alone)"),
-        Duration::from_secs(30),
-        |s| s.ready && s.nodes >= nodes,
-        |s| s.ready && s.nodes < nodes && s.samples_received == 0,
-    );
+    joiner.wait_joined(nodes, Duration::from_secs(30));
     joiner
 }
 

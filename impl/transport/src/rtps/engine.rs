@@ -14,6 +14,8 @@ pub(super) struct EngineThread {
     pub(super) name: String,
 }
 
+/// Where Linux lists this process's threads.
+const TASKS_DIR: &str = "/proc/self/task";
 /// Prefix of the names of `rustdds`'s threads.
 const ENGINE_THREAD_PREFIX: &str = "RustDDS";
 
@@ -22,9 +24,14 @@ const ENGINE_THREAD_PREFIX: &str = "RustDDS";
 pub(super) static CREATING_PARTICIPANTS: Mutex<()> = Mutex::new(());
 
 impl EngineThread {
+    /// Whether this process's threads can be watched: `/proc/self/task` can be read (Linux).
+    pub(super) fn watchable() -> bool {
+        std::fs::read_dir(TASKS_DIR).is_ok()
+    }
+
     /// The `rustdds` threads of this process now; empty where `/proc/self/task` cannot be read (not Linux).
     pub(super) fn all() -> Vec<EngineThread> {
-        let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return Vec::new() };
+        let Ok(tasks) = std::fs::read_dir(TASKS_DIR) else { return Vec::new() };
         tasks
             .filter_map(|task| {
                 let task = task.ok()?;
@@ -39,7 +46,7 @@ impl EngineThread {
     /// Whether the thread still runs: it is in `/proc/self/task` under its name (a thread id reused by another
     /// thread has another name). An unreadable entry for any other reason than its absence counts as running.
     pub(super) fn alive(&self) -> bool {
-        match std::fs::read_to_string(format!("/proc/self/task/{}/comm", self.tid)) {
+        match std::fs::read_to_string(format!("{TASKS_DIR}/{}/comm", self.tid)) {
             Ok(name) => name.trim_end_matches('\n') == self.name,
             Err(error) => error.kind() != std::io::ErrorKind::NotFound,
         }

@@ -65,7 +65,8 @@ impl Generation {
     /// `rustdds` hands a new writer or reader to its participant's event loop ends that thread and deadlocks the
     /// hand-over (see `build_here`); a build that has not ended [`DEADLOCKED_AFTER`] after one of its participants'
     /// threads did is given up as [`TransportError::EngineEnded`], and its thread and participants are left behind
-    /// (silent: their event loop has ended).
+    /// (silent: their event loop has ended). One that has not ended after [`GIVE_UP_AFTER`] is given up too (stuck
+    /// before its threads could be watched); should it end after all, what it built is dropped.
     pub(super) fn build(
         config: &RtpsConfig,
         multicast: bool,
@@ -305,7 +306,7 @@ fn join_domain(
     let (publishing, subscribing) = created?;
     let engine = watch.into_threads();
     let participants = 1 + usize::from(subscribing.is_some());
-    if engine.len() < 2 * participants && std::fs::read_dir("/proc/self/task").is_ok() {
+    if engine.len() < 2 * participants && EngineThread::watchable() {
         // Threads are watched here, yet some of the new participants' threads were gone before they could be seen
         // (a stop and resume while the participants were being created).
         return Err(TransportError::EngineEnded {
@@ -362,7 +363,7 @@ mod tests {
 
     #[test]
     fn the_threads_of_new_participants_are_found_and_their_end_is_seen() {
-        if std::fs::read_dir("/proc/self/task").is_err() {
+        if !EngineThread::watchable() {
             return; // Not Linux: nothing to watch.
         }
         let config = RtpsConfig { domain_id: 94, topic_prefix: "engine_threads".into(), ..RtpsConfig::default() };
