@@ -1,8 +1,15 @@
 //! [`ShmTransport`]: a [`Transport`] whose endpoints are all on one host, every channel an [`ShmLane`], and
 //! receivers woken by an iceoryx2 event service rather than polling (the spike showed polling costs milliseconds
-//! with 8 receivers on 2 cores). A publish's wake-up names its lane (event id [`lane_event`]), and a woken receiver
-//! looks at the lanes it was told of before the others; before it waits it looks at every lane, so a wake-up that
-//! was lost or merged delays nothing beyond the next look. It has no discovery and no other-host path: it is the
+//! with 8 receivers on 2 cores). A publish's wake-up names its lane (event id [`lane_event`]), and a waiting
+//! receiver looks only at the lanes it was told of, until a look finds one empty: an empty look at a lane costs
+//! about as much as taking a sample from it (iceoryx2 goes through every publisher's connection), and looking at
+//! all four lanes before and after every sample was a third of a threaded agent's instructions per received update
+//! (`scripts/hop-instructions.sh`). Every publish wakes every other endpoint, and a wake-up stays pending until the
+//! receiver's next wait takes it, so a sample that comes after a look is found at the next wait, at once. A wait
+//! that ends with no wake-up at all (its timeout) is followed by a look at every lane, and so is the first look of
+//! an endpoint: a sample whose wake-up never came (sent before this endpoint's listener existed, or a notification
+//! that failed) waits at most until then. [`Transport::try_recv`] looks at every lane when none was named. It has
+//! no discovery and no other-host path: it is the
 //! same-host half of the hybrid transport the design describes (`ARCHITECTURE.md`, "Same-host shared memory"), usable alone by agents
 //! that are known to share a host.
 
@@ -26,11 +33,11 @@ pub struct ShmTransport {
     listener: Mutex<iceoryx2::port::listener::Listener<ipc_threadsafe::Service>>,
     /// This endpoint's own listener, which its publishes do not wake.
     listener_id: iceoryx2::identifiers::UniqueListenerId,
-    /// The lane `try_recv` looks at first, so no channel starves the others.
+    /// The lane a look starts at, so no channel starves the others.
     next_lane: AtomicUsize,
-    /// Lanes a wake-up named that have not been found empty since (bit [`Channel::index`]): where a woken
-    /// receiver looks first. A hint only: every look that finds nothing there looks at every lane.
-    notified: AtomicU8,
+    /// Lanes that may hold a sample (bit [`Channel::index`]): named by a wake-up since a look last found them empty,
+    /// or all of them, at first and after a wait that no wake-up ended. A wait's receiver looks at these alone.
+    pending: AtomicU8,
     counters: Counters,
     max_sample_bytes: usize,
     _node: Node<ipc_threadsafe::Service>,
@@ -75,6 +82,8 @@ impl ShmTransport {
         let events = node
             .service_builder(&name)
             .event()
+            // A wait's drain swaps every id's counter (iceoryx2's default allows 256 ids: 32 cache lines a wake-up).
+            .event_id_max_value(MAX_EVENT_ID)
             .max_notifiers(settings.max_endpoints)
             .max_listeners(settings.max_endpoints)
             .max_nodes(settings.max_endpoints)
@@ -89,7 +98,7 @@ impl ShmTransport {
             listener_id: listener.id(),
             listener: Mutex::new(listener),
             next_lane: AtomicUsize::new(0),
-            notified: AtomicU8::new(0),
+            pending: AtomicU8::new(ALL_LANES),
             counters: Counters::default(),
             max_sample_bytes: settings.max_sample_bytes,
             _node: node,
@@ -97,8 +106,14 @@ impl ShmTransport {
     }
 }
 
+/// Every lane's bit.
+const ALL_LANES: u8 = (1 << Channel::COUNT) - 1;
+
 /// The event id of [`Transport::interrupt`]'s notification.
 const INTERRUPT: EventId = EventId::new(1);
+
+/// The highest event id the wake-up service carries: [`INTERRUPT`] and one per lane.
+const MAX_EVENT_ID: usize = 1 + Channel::COUNT;
 
 /// The event id of a publish's wake-up on `channel`: 2 and up, by [`Channel::index`].
 fn lane_event(channel: Channel) -> EventId {
@@ -129,6 +144,33 @@ impl ShmTransport {
             CallbackProgression::Continue
         });
         failed
+    }
+
+    /// The next sample on a lane of `lanes` (bits [`Channel::index`]), looked at in turn from a rotating start; a
+    /// pending lane found empty is pending no longer.
+    fn take_from(&self, lanes: u8) -> Option<Sample> {
+        let first = self.next_lane.fetch_add(1, Ordering::Relaxed);
+        for k in 0..Channel::COUNT {
+            let channel = Channel::ALL[(first + k) % Channel::COUNT];
+            let bit = 1 << channel.index();
+            if lanes & bit == 0 {
+                continue;
+            }
+            if let Some(sample) = self.take(channel) {
+                return Some(sample);
+            }
+            // A sample that comes after this look has a wake-up of its own, which the listener keeps.
+            self.pending.fetch_and(!bit, Ordering::Relaxed);
+        }
+        None
+    }
+
+    /// The next sample on a pending lane.
+    fn take_pending(&self) -> Option<Sample> {
+        match self.pending.load(Ordering::Relaxed) {
+            0 => None,
+            lanes => self.take_from(lanes),
+        }
     }
 
     /// The next sample on `channel`'s lane, counted.
@@ -170,29 +212,19 @@ impl Transport for ShmTransport {
         self.wake_others(channel).map_err(|e| write(format!("wake-up notify: {e:?}")))
     }
 
+    /// The pending lanes first, then, if they held nothing, every lane (so a caller that never waits, as a
+    /// simulation's pump, still gets every sample).
     fn try_recv(&self) -> Option<Sample> {
-        let first = self.next_lane.fetch_add(1, Ordering::Relaxed);
-        let notified = self.notified.load(Ordering::Relaxed);
-        let order = (0..Channel::COUNT).map(|k| Channel::ALL[(first + k) % Channel::COUNT]);
-        let named = |channel: &Channel| notified & 1 << channel.index() != 0;
-        // The lanes a wake-up named, then the others. (A sample that comes to a named lane after its look here has
-        // a wake-up of its own, which the listener keeps: the next wait returns at once.)
-        let (first_looks, then) = (order.clone().filter(named), order.filter(|channel| !named(channel)));
-        for channel in first_looks.chain(then) {
-            if let Some(sample) = self.take(channel) {
-                return Some(sample);
-            }
-            if named(&channel) {
-                self.notified.fetch_and(!(1 << channel.index()), Ordering::Relaxed);
-            }
-        }
-        None
+        self.take_pending().or_else(|| self.take_from(ALL_LANES))
     }
 
+    /// Looks at the pending lanes, then waits for a wake-up and looks at the lanes it names; after a wait that no
+    /// wake-up ended, at every lane. With a zero `timeout` it looks at the pending lanes alone (what came behind
+    /// a sample just taken).
     fn recv_timeout(&self, timeout: Duration) -> Option<Sample> {
         let deadline = Instant::now() + timeout;
         loop {
-            if let Some(sample) = self.try_recv() {
+            if let Some(sample) = self.take_pending() {
                 return Some(sample);
             }
             let left = deadline.saturating_duration_since(Instant::now());
@@ -209,18 +241,22 @@ impl Transport for ShmTransport {
                 },
                 left,
             );
-            self.notified.fetch_or(lanes, Ordering::Relaxed);
             match wait {
-                // A signal ended the wait (SIGCONT after a pause, every time): look again.
-                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                // No wake-up within the wait: look at every lane, in case one was lost.
+                Ok(0) => lanes = ALL_LANES,
+                Ok(_) => {}
+                // A signal ended the wait (SIGCONT after a pause, every time): look everywhere again.
+                Err(ListenerWaitError::InterruptSignal) => lanes = ALL_LANES,
                 Err(error) => {
                     tracing::warn!(?error, "shared-memory wake-up wait failed");
                     drop(listener);
                     std::thread::sleep(left.min(Duration::from_millis(1)));
+                    lanes = ALL_LANES;
                 }
             }
+            self.pending.fetch_or(lanes, Ordering::Relaxed);
             if interrupted {
-                return self.try_recv();
+                return self.take_pending();
             }
         }
     }
@@ -303,13 +339,44 @@ mod tests {
         assert_eq!(events, [lane_event(Channel::Updates), lane_event(Channel::Requests)]);
         // Told of the requests lane alone, b takes from it first, whichever lane its turn would start at.
         b.next_lane.store(Channel::Updates.index(), Ordering::Relaxed);
-        b.notified.store(lane_bit(lane_event(Channel::Requests)), Ordering::Relaxed);
+        b.pending.store(lane_bit(lane_event(Channel::Requests)), Ordering::Relaxed);
         assert_eq!(b.try_recv().expect("a sample").channel, Channel::Requests);
-        // A lane named but found empty is no longer named, and the look goes on to every lane.
+        // A lane named but found empty is no longer pending, and `try_recv` goes on to every lane.
         assert_eq!(b.try_recv().expect("a sample").channel, Channel::Updates);
-        assert_eq!(b.notified.load(Ordering::Relaxed), 0);
+        assert_eq!(b.pending.load(Ordering::Relaxed), 0);
         assert_eq!(b.try_recv(), None);
         assert_eq!((lane_bit(INTERRUPT), lane_bit(EventId::new(2 + Channel::COUNT))), (0, 0), "names no lane");
+    }
+
+    #[test]
+    fn a_receiver_looks_at_the_lanes_its_wake_ups_named_and_a_zero_wait_at_those_alone() {
+        let [a, b] = endpoints("pending-lanes", 1 << 10, [50, 51]);
+        // An endpoint's first look is at every lane; finding them empty, it has nothing pending.
+        assert_eq!(b.recv_timeout(Duration::ZERO), None);
+        assert_eq!(b.pending.load(Ordering::Relaxed), 0);
+        a.publish(Channel::Calls, Bytes::from_static(b"call")).expect("publish");
+        // Its wake-up is not taken yet: a zero wait does not look for it ...
+        assert_eq!(b.recv_timeout(Duration::ZERO), None);
+        // ... and a wait takes the wake-up at once and looks where it says.
+        let started = Instant::now();
+        assert_eq!(b.recv_timeout(Duration::from_secs(20)).expect("the sample").channel, Channel::Calls);
+        assert!(started.elapsed() < Duration::from_secs(20), "the pending wake-up did not end the wait");
+        assert_eq!(b.pending.load(Ordering::Relaxed), 1 << Channel::Calls.index(), "pending until found empty");
+        assert_eq!(b.recv_timeout(Duration::ZERO), None);
+        assert_eq!(b.pending.load(Ordering::Relaxed), 0);
+    }
+
+    #[test]
+    fn a_sample_whose_wake_up_was_lost_is_found_when_a_wait_ends_without_one() {
+        let [a, b] = endpoints("lost-wake-up", 1 << 10, [60, 61]);
+        assert_eq!(b.recv_timeout(Duration::ZERO), None);
+        a.publish(Channel::Sync, Bytes::from_static(b"answer")).expect("publish");
+        // Someone else takes b's wake-up: b is never told of the sample.
+        b.listener.lock().unwrap().try_wait(|_| {}).expect("wait");
+        assert_eq!(b.recv_timeout(Duration::ZERO), None);
+        // A wait that no wake-up ends looks at every lane before it returns.
+        let sample = b.recv_timeout(Duration::from_millis(50)).expect("found after the wait's timeout");
+        assert_eq!((sample.channel, sample.bytes.as_ref()), (Channel::Sync, &b"answer"[..]));
     }
 
     #[test]
