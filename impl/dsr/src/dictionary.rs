@@ -481,20 +481,25 @@ impl Dictionary {
         peek_type(&self.edge_types, self.allow_unknown, name, "edge type")
     }
 
-    /// The wire code of a built-in attribute name.
+    /// The wire code of a built-in attribute name (a hash lookup: every write's encoding asks, and a walk through
+    /// the table read a cache line per name before `cam_rgb`'s).
     pub(crate) fn builtin_attr_code(name: &str) -> Option<u16> {
-        BUILTIN_ATTRIBUTES.iter().position(|(known, _)| *known == name).map(|index| index as u16)
+        INTERNED.codes.get(name).copied()
     }
 }
 
-/// Shared copies of the built-in names, so decoding a delta does not allocate a string per built-in name it meets.
+/// Shared copies of the built-in names, so decoding a delta does not allocate a string per built-in name it meets,
+/// and the wire codes of the built-in attribute names.
 struct Interned {
     attrs: Vec<Name>,
+    codes: HashMap<&'static str, u16>,
     types: HashMap<&'static str, Name>,
 }
 
 static INTERNED: std::sync::LazyLock<Interned> = std::sync::LazyLock::new(|| Interned {
     attrs: BUILTIN_ATTRIBUTES.iter().map(|(name, _)| Name::new(name)).collect(),
+    // Each name is listed once (a test below holds the table to it).
+    codes: BUILTIN_ATTRIBUTES.iter().enumerate().map(|(code, (name, _))| (*name, code as u16)).collect(),
     types: BUILTIN_NODE_TYPES.iter().chain(BUILTIN_EDGE_TYPES).map(|name| (*name, Name::new(name))).collect(),
 });
 
@@ -544,4 +549,20 @@ fn peek_type(
         return Err(DictionaryError::UnknownType { what, name: name.chars().take(64).collect() });
     }
     validate_name(what, name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_built_in_attribute_name_is_listed_once_and_its_wire_code_names_it() {
+        let names: HashSet<&str> = BUILTIN_ATTRIBUTES.iter().map(|(name, _)| *name).collect();
+        assert_eq!(names.len(), BUILTIN_ATTRIBUTES.len(), "a built-in attribute name is listed twice");
+        for (code, (name, _)) in BUILTIN_ATTRIBUTES.iter().enumerate() {
+            assert_eq!(Dictionary::builtin_attr_code(name), Some(code as u16), "{name}");
+            assert_eq!(interned_attr(code as u16).as_deref(), Some(*name));
+        }
+        assert_eq!(Dictionary::builtin_attr_code("not_a_built_in_name"), None);
+    }
 }
