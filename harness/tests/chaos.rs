@@ -45,7 +45,16 @@ fn a_short_campaign_converges_after_every_fault_and_matches_the_specification() 
     assert_eq!(verdict["verdict"]["agents_compared"], 3);
     let kinds: Vec<&str> =
         verdict["episodes"].as_array().unwrap().iter().map(|e| e["kind"].as_str().unwrap()).collect();
-    for kind in ["loss", "one-way loss", "partition", "pause", "kill+restart", "kill+restart alone", "late join"] {
+    for kind in [
+        "loss",
+        "one-way loss",
+        "partition",
+        "pause",
+        "kill+restart",
+        "kill+restart alone",
+        "stop at start",
+        "late join",
+    ] {
         assert!(kinds.contains(&kind), "{kind} missing from {kinds:?}");
     }
     assert!(verdict["episodes"].as_array().unwrap().iter().all(|e| e["heal_to_converge_ms"].is_f64()));
@@ -102,8 +111,8 @@ fn a_secured_campaign_converges_after_every_fault_and_matches_the_specification(
 }
 
 /// Issue 20: the campaign with every agent on one host (`--same-host`: one network namespace), so the default
-/// transport moves their samples through shared memory; the process faults (pause, kill and restart, late join)
-/// converge and match the specification as over RTPS.
+/// transport moves their samples through shared memory; the process faults (pause, kill and restart, a stop during
+/// a restart, late join) converge and match the specification as over RTPS.
 #[test]
 fn a_same_host_campaign_over_shared_memory_converges_after_every_process_fault() {
     if !is_root() {
@@ -128,7 +137,7 @@ fn a_same_host_campaign_over_shared_memory_converges_after_every_process_fault()
     assert!(verdict["shm_samples_received"].as_u64() > Some(0), "nothing went through shared memory: {verdict}");
     let kinds: Vec<&str> =
         verdict["episodes"].as_array().unwrap().iter().map(|e| e["kind"].as_str().unwrap()).collect();
-    assert_eq!(kinds.len(), 3 + 2, "{kinds:?}");
-    assert!(kinds.iter().all(|k| ["pause", "kill+restart", "late join"].contains(k)), "{kinds:?}");
+    assert_eq!(kinds.len(), 4 + 3, "{kinds:?}");
+    assert!(kinds.iter().all(|k| ["pause", "kill+restart", "stop at start", "late join"].contains(k)), "{kinds:?}");
     let _ = std::fs::remove_dir_all(&out);
 }

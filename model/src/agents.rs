@@ -5,7 +5,9 @@
 //! one twice (within budgets), tick an agent (its clock jumps to its next deadline, so clocks advance and skew per
 //! agent), a local write (insert a node, write an attribute, link two nodes, delete a node), crash an agent (its
 //! messages in flight to it are lost) and restart it as a new life (reading the incarnation its previous life
-//! recorded, as the shell does), cut the network between two groups of agents and heal it. Every message is
+//! recorded, as the shell does), cut the network between two groups of agents and heal it, and stop a joining
+//! agent's process (`SIGSTOP`: it neither ticks, writes nor takes a message) and resume it after [`STOP_NS`], longer
+//! than its join wait, when its first act is a tick that late. Every message is
 //! encoded with [`agent::envelope::Message::encode`] when sent and decoded (envelope and deltas) when delivered.
 //!
 //! Agent 0 is the first agent of the system: it starts alone at its first tick. The others start joining and take
@@ -46,6 +48,9 @@ const RETRY_NS: u64 = 20_000_000;
 const JOIN_WAIT_NS: u64 = 3 * RETRY_NS;
 /// Announce period.
 const ANNOUNCE_NS: u64 = 40_000_000;
+/// How long a stopped agent's process stays stopped: twice the join wait, so a joiner that counted the time against
+/// its wait would find it over at once on resume.
+pub const STOP_NS: u64 = 2 * JOIN_WAIT_NS;
 
 /// Configuration of the agents model: the number of agents and the budgets of the checker's choices.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -78,7 +83,7 @@ impl Default for AgentsConfig {
     fn default() -> Self {
         AgentsConfig {
             agents: 2,
-            budgets: Budgets { writes: 2, losses: 1, duplicates: 0, crashes: 1, cuts: 1, ticks: 4 },
+            budgets: Budgets { writes: 2, losses: 1, duplicates: 0, crashes: 1, cuts: 1, ticks: 4, stops: 0 },
             history: 2,
             announce_group: agent::config::DEFAULT_ANNOUNCE_GROUP,
             peer_forget_intervals: 1,
@@ -167,6 +172,10 @@ pub struct Slot {
     pub lives: u32,
     /// Dots of deltas received while the current life was joining.
     pub early: BTreeSet<Dot>,
+    /// Whether its process is stopped now (it neither ticks, writes nor takes a message).
+    pub stopped: bool,
+    /// Whether the current life's process was stopped while it joined.
+    pub stopped_joining: bool,
 }
 
 /// Which checks failed, as bits, with what was seen.
@@ -233,6 +242,8 @@ pub struct Life {
     pub alone: bool,
     /// It started alone while another agent was ready.
     pub alone_beside_ready: bool,
+    /// Its process was stopped while it joined.
+    pub stopped_joining: bool,
 }
 
 /// Counts of the checker's choices: what a configuration allows on one path, and what a state has spent.
@@ -250,6 +261,8 @@ pub struct Budgets {
     pub cuts: usize,
     /// Timer ticks, shared by all agents (the settling rounds after the faults are not counted).
     pub ticks: usize,
+    /// Stops of a joining agent's process (each resumed when the checker chooses, or when the faults stop).
+    pub stops: usize,
 }
 
 /// Transient things that happened on a path (for the `sometimes` properties; lives are in [`AgentsState::lives`]).
@@ -280,6 +293,10 @@ pub enum Action {
     Crash(usize),
     /// Restart a crashed agent as a new life.
     Restart(usize),
+    /// Stop a joining agent's process.
+    Stop(usize),
+    /// Resume a stopped agent's process, [`STOP_NS`] later.
+    Resume(usize),
     /// Cut the agents in the bit set from the others.
     Cut(u8),
     /// Heal the cut.
@@ -318,6 +335,7 @@ impl AgentsModel {
             LifeSeed { nonce: (index as u64 + 1) << 32 | u64::from(slot.lives), recorded_incarnation: slot.record };
         slot.core = Some(AgentCore::new(self.config.protocol(index), life, None, slot.now_ns));
         slot.early.clear();
+        slot.stopped_joining = false;
     }
 
     fn fail(&self, state: &mut AgentsState, check: Check, detail: String) {
@@ -374,7 +392,15 @@ impl AgentsModel {
         }
         let others_ready =
             state.slots.iter().enumerate().any(|(i, s)| i != index && s.core.as_ref().is_some_and(AgentCore::is_ready));
-        state.lives.push(Life { agent: index, life, replica, alone, alone_beside_ready: alone && others_ready });
+        let stopped_joining = state.slots[index].stopped_joining;
+        state.lives.push(Life {
+            agent: index,
+            life,
+            replica,
+            alone,
+            alone_beside_ready: alone && others_ready,
+            stopped_joining,
+        });
         let slot = &mut state.slots[index];
         slot.record = Some(slot.record.unwrap_or(0).max(incarnation));
         let slot = &state.slots[index];
@@ -497,6 +523,17 @@ impl AgentsModel {
         self.emit(state, index, None, &out);
     }
 
+    /// Resumes a stopped agent: its clock has moved [`STOP_NS`], and its first act is a tick that late (its thread's
+    /// sleep is long over).
+    fn resume(&self, state: &mut AgentsState, index: usize) {
+        let slot = &mut state.slots[index];
+        slot.stopped = false;
+        let Some(core) = slot.core.as_mut() else { return };
+        slot.now_ns = slot.now_ns.saturating_add(STOP_NS);
+        let out = core.tick(slot.now_ns);
+        self.emit(state, index, None, &out);
+    }
+
     /// The state's own checks on every state: bounded buffers and replica invariants.
     fn audit(&self, state: &mut AgentsState) {
         for (index, slot) in state.slots.clone().iter().enumerate() {
@@ -526,7 +563,15 @@ impl Model for AgentsModel {
     fn init_states(&self) -> Vec<AgentsState> {
         let mut slots = Vec::new();
         for index in 0..self.config.agents {
-            let mut slot = Slot { core: None, now_ns: 0, record: None, lives: 0, early: BTreeSet::new() };
+            let mut slot = Slot {
+                core: None,
+                now_ns: 0,
+                record: None,
+                lives: 0,
+                early: BTreeSet::new(),
+                stopped: false,
+                stopped_joining: false,
+            };
             self.new_life(index, &mut slot);
             slots.push(slot);
         }
@@ -552,9 +597,12 @@ impl Model for AgentsModel {
             if i > 0 && state.network[i - 1] == *envelope {
                 continue;
             }
-            actions.push(Action::Deliver(i));
-            if spent.duplicates < config.duplicates {
-                actions.push(Action::Duplicate(i));
+            // A stopped process takes nothing: its messages wait (or are lost).
+            if !state.slots[envelope.to].stopped {
+                actions.push(Action::Deliver(i));
+                if spent.duplicates < config.duplicates {
+                    actions.push(Action::Duplicate(i));
+                }
             }
             if spent.losses < config.losses {
                 actions.push(Action::Lose(i));
@@ -565,11 +613,18 @@ impl Model for AgentsModel {
                 actions.push(Action::Restart(index));
                 continue;
             };
-            if spent.ticks < config.ticks {
-                actions.push(Action::Tick(index));
-            }
             if spent.crashes < config.crashes {
                 actions.push(Action::Crash(index));
+            }
+            if slot.stopped {
+                actions.push(Action::Resume(index));
+                continue;
+            }
+            if spent.stops < config.stops && !core.is_ready() {
+                actions.push(Action::Stop(index));
+            }
+            if spent.ticks < config.ticks {
+                actions.push(Action::Tick(index));
             }
             if spent.writes < config.writes
                 && let Some(replica) = core.replica()
@@ -624,8 +679,15 @@ impl Model for AgentsModel {
             Action::Crash(index) => {
                 state.spent.crashes += 1;
                 state.slots[index].core = None;
+                state.slots[index].stopped = false;
                 state.network.retain(|e| e.to != index);
             }
+            Action::Stop(index) => {
+                state.spent.stops += 1;
+                state.slots[index].stopped = true;
+                state.slots[index].stopped_joining = true;
+            }
+            Action::Resume(index) => self.resume(&mut state, index),
             Action::Restart(index) => {
                 let mut slot = state.slots[index].clone();
                 self.new_life(index, &mut slot);
@@ -643,7 +705,7 @@ impl Model for AgentsModel {
     }
 
     fn properties(&self) -> Vec<Property<Self>> {
-        vec![
+        let mut properties = vec![
             Property::always(properties::UNIQUE_LIVES, |_, s: &AgentsState| s.holds(Check::UniqueLives)),
             Property::always(properties::BOUNDED, |_, s: &AgentsState| s.holds(Check::Bounded)),
             Property::always(properties::INVARIANTS, |_, s: &AgentsState| s.holds(Check::Invariants)),
@@ -667,7 +729,13 @@ impl Model for AgentsModel {
                 let c = &model.config.budgets;
                 s.spent == Budgets { duplicates: s.spent.duplicates, ticks: s.spent.ticks, ..*c }
             }),
-        ]
+        ];
+        if self.config.budgets.stops > 0 {
+            properties.push(Property::sometimes(properties::W_STOPPED_JOINED, |_, s: &AgentsState| {
+                s.lives.iter().any(|l| l.stopped_joining && !l.alone)
+            }));
+        }
+        properties
     }
 
     fn format_action(&self, action: &Action) -> String {
@@ -689,6 +757,11 @@ impl AgentsModel {
         let mut state = state.clone();
         state.cut = None;
         let before = state.lives.len();
+        for index in 0..state.slots.len() {
+            if state.slots[index].stopped {
+                self.resume(&mut state, index);
+            }
+        }
         for _ in 0..SETTLE_ROUNDS {
             for index in 0..state.slots.len() {
                 // Time passes for every agent alike now: each clock moves one join retry per round.
@@ -838,6 +911,8 @@ pub mod properties {
     pub const W_ALONE: &str = "a life starts alone while another agent is ready";
     /// Witness.
     pub const W_ALL_FAULTS: &str = "every budget is spent on one path";
+    /// Witness (with a stop in the budgets).
+    pub const W_STOPPED_JOINED: &str = "a joiner stopped while it joins takes a peer's graph when resumed";
 }
 
 /// Checks the agents model of `config`.

@@ -189,6 +189,8 @@ pub fn agent_mutant_configs() -> Vec<(ProtocolMutant, AgentsConfig, &'static str
                 ProtocolMutant::PendingAskNeverExpires => {
                     (with(Budgets { writes: 2, losses: 2, ticks: 4, ..none }), p::SETTLES)
                 }
+                // A joiner stopped before its peer's answer came.
+                ProtocolMutant::JoinWaitCountsAbsence => (with(Budgets { stops: 1, ..none }), p::JOINER_SERVED),
             };
             (mutant, config.with_mutant(mutant), property)
         })

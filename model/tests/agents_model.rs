@@ -60,3 +60,15 @@ fn an_agent_forgets_a_silent_peer_and_the_agents_still_settle() {
     assert!(forgotten.holds, "no path forgets a peer: {}", report.to_text());
     assert_eq!(report.unique_states, 1_206);
 }
+
+#[test]
+fn a_joiner_stopped_while_it_joins_takes_the_peers_graph_when_it_resumes() {
+    // The joiner's process is stopped for twice its join wait and resumed; its first act is a tick that late. The
+    // time it could not listen does not count against its wait, so it asks again and joins the ready peer's graph
+    // (planted, `JoinWaitCountsAbsence` starts it alone: the mutant check kills it). With a loss (its request, or
+    // the answer that waits for it while it is stopped) and a crash (of the stopped process, too) beside it.
+    let report = check(config(2, Budgets { stops: 1, crashes: 1, losses: 1, ..quiet() }));
+    let joined = report.properties.iter().find(|p| p.name == model::agents::properties::W_STOPPED_JOINED).unwrap();
+    assert!(joined.holds, "no path resumes a stopped joiner into a peer's graph: {}", report.to_text());
+    assert_eq!(report.unique_states, 57_032);
+}

@@ -124,6 +124,9 @@ struct AgentsArgs {
     /// Timer ticks, shared by all agents.
     #[arg(long, default_value_t = 4)]
     ticks: usize,
+    /// Stops of a joining agent's process (SIGSTOP; each resumed later than the join wait).
+    #[arg(long, default_value_t = 0)]
+    stops: usize,
     /// Agents per announce group: with fewer than --agents, each agent announces every ⌈agents / group⌉
     /// periods once it has heard its peers.
     #[arg(long, default_value_t = agent::config::DEFAULT_ANNOUNCE_GROUP)]
@@ -206,6 +209,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
                     crashes: args.crashes,
                     cuts: args.cuts,
                     ticks: args.ticks,
+                    stops: args.stops,
                 },
                 announce_group: args.announce_group,
                 peer_forget_intervals: args.peer_forget_intervals,

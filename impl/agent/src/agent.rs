@@ -327,6 +327,7 @@ impl<T: Transport + 'static> Agent<T> {
         StatusLine {
             id: status.id.0,
             ready: status.ready,
+            alone: status.ready && status.join.alone,
             graph: status.graph,
             foreign_refused: status.foreign_refused,
             foreign_graphs: status.foreign_graphs,

@@ -295,7 +295,7 @@ impl AgentCore {
     fn discount_absence(&mut self, now_ns: u64) {
         let due = self.last_request_ns.map_or(self.joining_since_ns, |at| at.saturating_add(self.config.join_retry_ns));
         let late_ns = now_ns.saturating_sub(due);
-        if late_ns > self.config.join_retry_ns {
+        if late_ns > self.config.join_retry_ns && !self.config.plant.is(ProtocolMutant::JoinWaitCountsAbsence) {
             self.joining_since_ns = self.joining_since_ns.saturating_add(late_ns);
         }
     }

@@ -20,17 +20,21 @@ pub enum ProtocolMutant {
     JoinRequestOnce,
     /// An unanswered missing-request stays outstanding for ever, so no later request goes out.
     PendingAskNeverExpires,
+    /// A joining life counts the time its process was stopped against its join wait: resumed, it starts alone at
+    /// once beside peers it had no chance to hear (the join wait's discount, `AgentCore::joining_since_ns`, lost).
+    JoinWaitCountsAbsence,
 }
 
 impl ProtocolMutant {
     /// Every mutant.
-    pub const ALL: [ProtocolMutant; 6] = [
+    pub const ALL: [ProtocolMutant; 7] = [
         ProtocolMutant::NoGapRequest,
         ProtocolMutant::IncarnationForgotten,
         ProtocolMutant::DropEarlyDelta,
         ProtocolMutant::AnnounceTimerLost,
         ProtocolMutant::JoinRequestOnce,
         ProtocolMutant::PendingAskNeverExpires,
+        ProtocolMutant::JoinWaitCountsAbsence,
     ];
 }
 

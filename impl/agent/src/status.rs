@@ -122,6 +122,9 @@ pub struct StatusLine {
     pub id: u32,
     /// Whether it has a graph (joined, or started alone).
     pub ready: bool,
+    /// Whether this life became ready alone (no answer within its join wait) rather than from a peer's graph.
+    #[serde(default)]
+    pub alone: bool,
     /// The graph it belongs to (`None` while it joins without naming one).
     #[serde(default)]
     pub graph: Option<GraphId>,

@@ -24,8 +24,8 @@ use agent::StatusLine;
 use measure::units::ms_from_duration;
 
 use super::protocol::{Command, FinalState, Report, WriteRecord, parse_report};
-use super::record::{CampaignConfig, EpisodeResult, Event, Recorded, Segment, Shown};
-use super::schedule::{Episode, Fault, Schedule};
+use super::record::{CampaignConfig, EpisodeResult, Event, ReadyLife, Recorded, Segment, Shown};
+use super::schedule::{Episode, Fault, Schedule, StopPoint};
 
 #[derive(Debug, Default)]
 struct Slot {
@@ -37,6 +37,10 @@ struct Slot {
     next_write: Option<Instant>,
     status: Option<(Instant, StatusLine)>,
     replica: Option<u32>,
+    /// The other slots that had a graph, ran, were not stopped and were reachable when this life started.
+    ready_peers: Vec<usize>,
+    /// Its namespace is cut off from the others (a kill whose new life is isolated).
+    isolated: bool,
     segments: Vec<Segment>,
     final_state: Option<FinalState>,
 }
@@ -55,6 +59,7 @@ pub struct Campaign {
     writing: bool,
     history: std::io::BufWriter<std::fs::File>,
     writes: Vec<WriteRecord>,
+    lives: Vec<ReadyLife>,
     killed_replicas: Vec<u32>,
     skipped: u64,
     problems: Vec<String>,
@@ -129,6 +134,7 @@ impl Campaign {
             writing: false,
             history,
             writes: Vec::new(),
+            lives: Vec::new(),
             killed_replicas: Vec::new(),
             skipped: 0,
             problems: Vec::new(),
@@ -193,6 +199,11 @@ impl Campaign {
 
     fn start(&mut self, slot: usize) -> Result<()> {
         let life = self.slots[slot].lives;
+        let ready_peers = if self.slots[slot].isolated {
+            Vec::new()
+        } else {
+            self.running().filter(|&other| other != slot && self.ready(other) && !self.slots[other].paused).collect()
+        };
         let proc = Proc::start(&self.launch, &self.network.namespace(slot), slot, life, self.lines_tx.clone())?;
         let s = &mut self.slots[slot];
         s.lives += 1;
@@ -203,6 +214,7 @@ impl Campaign {
         s.draining = false;
         s.paused = false;
         s.next_write = None;
+        s.ready_peers = ready_peers;
         let t_ms = self.now_ms();
         self.log(&Event::Started { t_ms, slot, life })
     }
@@ -234,7 +246,9 @@ impl Campaign {
 
     fn set_filters(&mut self, filters: &BTreeMap<usize, Filter>) -> Result<()> {
         for slot in 0..self.slots.len() {
-            self.network.set_filter(slot, filters.get(&slot).unwrap_or(&Filter::default()))?;
+            let filter = filters.get(&slot).cloned().unwrap_or_default();
+            self.network.set_filter(slot, &filter)?;
+            self.slots[slot].isolated = filter.isolated;
         }
         Ok(())
     }
@@ -261,6 +275,28 @@ impl Campaign {
                 self.pump_for(fault_for / 3)?;
             }
             Fault::LateJoin { agent } => self.start(*agent)?,
+            Fault::StopAtStart { agent, down_ms, at, stopped_ms } => {
+                let agent = *agent;
+                self.drain(agent)?;
+                self.signal(agent, "KILL")?;
+                self.pump_for(Duration::from_millis(*down_ms))?;
+                self.start(agent)?;
+                let after_ms = match at {
+                    StopPoint::Building { after_ms } => after_ms,
+                    StopPoint::Joining { after_ms } => {
+                        // Its first status line: the agent exists and waits for a graph.
+                        self.wait_until(|c| c.slots[agent].status.is_some(), Duration::from_secs(30))?;
+                        after_ms
+                    }
+                };
+                self.pump_for(Duration::from_millis(*after_ms))?;
+                self.signal(agent, "STOP")?;
+                self.pump_for(Duration::from_millis(*stopped_ms))?;
+                self.signal(agent, "CONT")?;
+                // A life that hangs in its start fails the campaign here; heal once it has its graph and has written.
+                self.wait_until(|c| c.ready(agent), Duration::from_millis(self.config.settle_ms))?;
+                self.pump_for(fault_for / 3)?;
+            }
             other => self.set_filters(&filters_of(other, self.slots.len()))?,
         }
         let until = start + fault_for;
@@ -407,7 +443,10 @@ impl Campaign {
                 if status.ready && s.replica.is_none() {
                     s.replica = status.replica;
                     let replica = status.replica.unwrap_or(0);
-                    self.log(&Event::Ready { t_ms, slot, life: line.life, replica })?;
+                    let life =
+                        ReadyLife { slot, life: line.life, alone: status.alone, ready_peers: s.ready_peers.clone() };
+                    self.log(&Event::Ready { t_ms, replica, life: life.clone() })?;
+                    self.lives.push(life);
                 }
                 self.slots[slot].status = Some((line.at, status));
             }
@@ -522,6 +561,7 @@ impl Campaign {
         }
         Ok(Recorded {
             writes: std::mem::take(&mut self.writes),
+            lives: std::mem::take(&mut self.lives),
             killed_replicas: std::mem::take(&mut self.killed_replicas),
             finals,
             episodes,
@@ -570,7 +610,7 @@ pub fn filters_of(fault: &Fault, slots: usize) -> BTreeMap<usize, Filter> {
                 drop(b, side.clone(), 100);
             }
         }
-        Fault::Pause { .. } | Fault::Kill { .. } | Fault::LateJoin { .. } => {}
+        Fault::Pause { .. } | Fault::Kill { .. } | Fault::LateJoin { .. } | Fault::StopAtStart { .. } => {}
     }
     filters
 }

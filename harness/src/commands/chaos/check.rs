@@ -13,6 +13,10 @@
 //! 4. **The specification's graph**: the full digest of the final graph equals the digest of
 //!    `model::spec::visible_graph` over the recorded writes that were applied, each with the operations its
 //!    replica had applied when it was made as its past. Stamps must also follow causality (`spec::check_stamps`).
+//! 5. **Joiners served** ([`check_joins`]): no life started alone (a graph of its own, merged only by anti-entropy)
+//!    while another agent had the graph, ran, was not stopped and could reach it when the life started: the
+//!    agents model's "a joiner with a ready peer alive joins its graph, not alone", on real processes. Not in a
+//!    secured campaign, whose DDS Security handshake outlasts the join wait.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -21,6 +25,7 @@ use model::spec::{self, OpKind, OpRecord};
 use serde::{Deserialize, Serialize};
 
 use super::protocol::{FinalState, RecordedOp, WriteRecord};
+use super::record::ReadyLife;
 use super::workload::value_of;
 
 /// The verdict's figures.
@@ -139,6 +144,19 @@ pub fn check(writes: &[WriteRecord], killed: &[u32], finals: &[(usize, FinalStat
         ));
     }
     verdict
+}
+
+/// Rule 5 of the module documentation, over every life that got its graph.
+pub fn check_joins(lives: &[ReadyLife], verdict: &mut Verdict) {
+    for life in lives.iter().filter(|life| life.alone && !life.ready_peers.is_empty()) {
+        let peers: Vec<String> = life.ready_peers.iter().map(|slot| format!("a{slot}")).collect();
+        verdict.violations.push(format!(
+            "agent {} life {} started alone, although {} had the graph, ran and could reach it when it started",
+            life.slot,
+            life.life,
+            peers.join(", ")
+        ));
+    }
 }
 
 fn lost_writes(writes: &[WriteRecord], killed: &[u32], applied: &CausalContext, verdict: &mut Verdict) {
@@ -311,5 +329,20 @@ mod tests {
         records.push(record);
         let verdict = check(&records, &[], &finals(&replicas));
         assert!(verdict.violations.iter().any(|v| v.contains("ended with digest")), "{:?}", verdict.violations);
+    }
+
+    #[test]
+    fn a_life_that_started_alone_beside_a_reachable_ready_agent_is_caught_and_one_with_none_is_not() {
+        let life = |slot, alone, ready_peers: Vec<usize>| ReadyLife { slot, life: 1, alone, ready_peers };
+        let mut verdict = Verdict::default();
+        // The first agents of a campaign start together, none has a graph: alone is right. A joiner that took the
+        // graph is right too.
+        check_joins(&[life(0, true, vec![]), life(1, true, vec![]), life(2, false, vec![0, 1])], &mut verdict);
+        assert!(verdict.passed(), "{:?}", verdict.violations);
+        check_joins(&[life(2, true, vec![0, 1])], &mut verdict);
+        assert_eq!(
+            verdict.violations,
+            ["agent 2 life 1 started alone, although a0, a1 had the graph, ran and could reach it when it started"]
+        );
     }
 }

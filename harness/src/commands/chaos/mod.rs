@@ -86,6 +86,10 @@ pub struct ChaosArgs {
     /// network faults filter by namespace. Not with `--security` (shared memory would bypass it).
     #[arg(long, conflicts_with = "security")]
     pub same_host: bool,
+    /// The fault kinds to draw from (default: every kind, or with `--same-host` the process faults), e.g.
+    /// `--faults "stop at start,late join"`; the last agent starts only in a `late join`.
+    #[arg(long, value_delimiter = ',')]
+    pub faults: Vec<String>,
     /// Plant this protocol bug in every agent (an `agent::mutants::ProtocolMutant` name, e.g.
     /// `IncarnationForgotten`), to check that the campaign catches it. Only in a build with the `mutants` feature.
     #[cfg(feature = "mutants")]
@@ -101,6 +105,7 @@ pub fn run(args: ChaosArgs) -> Result<bool> {
     if args.agents > 200 || args.write_hz <= 0.0 || args.fault_ms < 500 {
         bail!("--agents must be at most 200, --write-hz positive and --fault-ms at least 500");
     }
+    fault_kinds(&args)?;
     #[cfg(feature = "mutants")]
     if let Some(name) = &args.plant {
         serve::protocol_mutant(name)?;
@@ -144,6 +149,28 @@ pub fn run(args: ChaosArgs) -> Result<bool> {
     Ok(summary.failed.is_empty())
 }
 
+/// The fault kinds of `--faults`, checked against the kinds the campaign can run; every one (every process fault
+/// with `--same-host`) when none is given.
+fn fault_kinds(args: &ChaosArgs) -> Result<Vec<&'static str>> {
+    let possible: &[&'static str] = if args.same_host { &Fault::PROCESS_KINDS } else { &Fault::KINDS };
+    if args.faults.is_empty() {
+        return Ok(possible.to_vec());
+    }
+    args.faults
+        .iter()
+        .map(|name| {
+            let name = name.trim();
+            possible.iter().copied().find(|kind| *kind == name).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--faults: {name:?} is not a fault kind{} (one of: {})",
+                    if args.same_host { " of --same-host" } else { "" },
+                    possible.join(", ")
+                )
+            })
+        })
+        .collect()
+}
+
 fn run_one(
     args: &ChaosArgs,
     seed: u64,
@@ -165,15 +192,17 @@ fn run_one(
         #[cfg(feature = "mutants")]
         plant: args.plant.clone(),
     };
-    let kinds: &[&str] = if args.same_host { &Fault::PROCESS_KINDS } else { &Fault::KINDS };
-    let schedule = Schedule::generate(seed, args.agents, args.rounds, args.fault_ms, kinds);
+    let schedule = Schedule::generate(seed, args.agents, args.rounds, args.fault_ms, &fault_kinds(args)?);
     let dir = args.out.join(format!("seed-{seed}"));
     let tag = format!("cx{}", std::process::id());
     let mut provenance = measure::provenance::Provenance::current();
     provenance.seeds.insert("chaos".into(), seed);
     let campaign = Campaign::new(config.clone(), program.to_owned(), dir.clone(), &tag, Arc::clone(interrupted))?;
     let recorded = campaign.run(&schedule)?;
-    let verdict = check::check(&recorded.writes, &recorded.killed_replicas, &recorded.finals);
+    let mut verdict = check::check(&recorded.writes, &recorded.killed_replicas, &recorded.finals);
+    if !config.security {
+        check::check_joins(&recorded.lives, &mut verdict);
+    }
     let report = CampaignReport::new(config, &recorded, verdict, provenance);
     report.write(&dir, &recorded)?;
     Ok(report)

@@ -63,12 +63,11 @@ pub enum Event {
     Ready {
         /// Milliseconds since the campaign started.
         t_ms: f64,
-        /// The slot.
-        slot: usize,
-        /// The life.
-        life: u32,
         /// Its replica id.
         replica: u32,
+        /// The life, whether it started alone, and the peers that had a graph when it started.
+        #[serde(flatten)]
+        life: ReadyLife,
     },
     /// A signal sent to an agent process (`STOP`, `CONT`, `KILL`).
     Signal {
@@ -130,6 +129,22 @@ pub enum Event {
     },
 }
 
+/// A life that got its graph, as the joins' check ([`super::check`]) needs it.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ReadyLife {
+    /// The slot.
+    pub slot: usize,
+    /// The life.
+    pub life: u32,
+    /// It started alone (no graph answer within its join wait) rather than from a peer's graph.
+    #[serde(default)]
+    pub alone: bool,
+    /// The other slots that had a graph, were running, not stopped, and reachable (the new life's namespace not
+    /// cut off) when this life started.
+    #[serde(default)]
+    pub ready_peers: Vec<usize>,
+}
+
 /// What an agent slot shows at a moment, for the timeline figure.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -183,6 +198,8 @@ pub struct EpisodeResult {
 pub struct Recorded {
     /// Every write, in the order the campaign received them.
     pub writes: Vec<WriteRecord>,
+    /// Every life that got its graph, in that order.
+    pub lives: Vec<ReadyLife>,
     /// Replica ids of lives that were killed.
     pub killed_replicas: Vec<u32>,
     /// Final states of the agents running at the end.

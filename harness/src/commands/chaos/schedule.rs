@@ -7,6 +7,7 @@
 //! first round (until then no fault touches it).
 
 use std::collections::BTreeSet;
+use std::fmt;
 
 use serde::{Deserialize, Serialize};
 use transport::rng::SplitMix64;
@@ -56,6 +57,45 @@ pub enum Fault {
         /// The joining agent.
         agent: usize,
     },
+    /// `SIGKILL`, a restart after `down_ms`, `SIGSTOP` of the new process during its start (`at`), `SIGCONT`
+    /// `stopped_ms` later: the new life must not hang, and must take the running graph when it resumes (the time it
+    /// was stopped does not count against its join wait), not start alone.
+    StopAtStart {
+        /// The stopped agent.
+        agent: usize,
+        /// Milliseconds between the kill and the restart.
+        down_ms: u64,
+        /// When the new process is stopped.
+        at: StopPoint,
+        /// Milliseconds the new process is stopped.
+        stopped_ms: u64,
+    },
+}
+
+/// When `stop at start` stops the new process.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopPoint {
+    /// This many milliseconds after the process started: while it builds its transport (the first 10–60 ms).
+    Building {
+        /// Milliseconds after the start.
+        after_ms: u64,
+    },
+    /// This many milliseconds after its first status line (the agent exists and waits for a graph): in its join
+    /// wait, before a peer's answer comes (over RTPS discovery alone takes some 100 ms).
+    Joining {
+        /// Milliseconds after the first status line.
+        after_ms: u64,
+    },
+}
+
+impl fmt::Display for StopPoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StopPoint::Building { after_ms } => write!(f, "{after_ms} ms after its start (building its transport)"),
+            StopPoint::Joining { after_ms } => write!(f, "{after_ms} ms after its first status (joining)"),
+        }
+    }
 }
 
 impl Fault {
@@ -69,16 +109,25 @@ impl Fault {
             Fault::Kill { isolated: false, .. } => "kill+restart",
             Fault::Kill { isolated: true, .. } => "kill+restart alone",
             Fault::LateJoin { .. } => "late join",
+            Fault::StopAtStart { .. } => "stop at start",
         }
     }
 
     /// Every kind, in a fixed order.
-    pub const KINDS: [&'static str; 7] =
-        ["loss", "one-way loss", "partition", "pause", "kill+restart", "kill+restart alone", "late join"];
+    pub const KINDS: [&'static str; 8] = [
+        "loss",
+        "one-way loss",
+        "partition",
+        "pause",
+        "kill+restart",
+        "kill+restart alone",
+        "stop at start",
+        "late join",
+    ];
 
     /// The kinds that need no network fault (what `cortex chaos --same-host` draws from): a kill whose new life is
     /// isolated needs its namespace cut off.
-    pub const PROCESS_KINDS: [&'static str; 3] = ["pause", "kill+restart", "late join"];
+    pub const PROCESS_KINDS: [&'static str; 4] = ["pause", "kill+restart", "stop at start", "late join"];
 
     /// A one-line description.
     pub fn describe(&self) -> String {
@@ -92,6 +141,9 @@ impl Fault {
                 format!("kill a{agent}, restart after {down_ms} ms{}", if *isolated { ", isolated" } else { "" })
             }
             Fault::LateJoin { agent } => format!("late join a{agent}"),
+            Fault::StopAtStart { agent, down_ms, at, stopped_ms } => {
+                format!("kill a{agent}, restart after {down_ms} ms, stop it {at} for {stopped_ms} ms")
+            }
         }
     }
 }
@@ -174,6 +226,18 @@ fn draw(kind: &str, running: &[usize], late: usize, fault_ms: u64, rng: &mut Spl
             down_ms: fault_ms / 4 + rng.range(0, fault_ms / 4),
             isolated: kind == "kill+restart alone",
         },
+        // Stopped while it builds its transport or while it waits for a graph, one or the other, for longer than the
+        // campaign's join wait at the defaults (1.5 s against fault_ms / 2 and more).
+        "stop at start" => Fault::StopAtStart {
+            agent: one(running, rng),
+            down_ms: fault_ms / 10,
+            at: if rng.range(0, 1) == 0 {
+                StopPoint::Building { after_ms: rng.range(10, 60) }
+            } else {
+                StopPoint::Joining { after_ms: rng.range(0, 40) }
+            },
+            stopped_ms: fault_ms / 2 + rng.range(0, fault_ms / 4),
+        },
         _ => Fault::LateJoin { agent: late },
     }
 }
@@ -187,9 +251,9 @@ mod tests {
         let a = Schedule::generate(1, 4, 2, 3000, &Fault::KINDS);
         assert_eq!(a, Schedule::generate(1, 4, 2, 3000, &Fault::KINDS));
         assert_ne!(a, Schedule::generate(2, 4, 2, 3000, &Fault::KINDS));
-        assert_eq!(a.episodes.len(), 7 + 6);
+        assert_eq!(a.episodes.len(), 8 + 7);
         for kind in Fault::KINDS {
-            assert_eq!(a.episodes[..7].iter().filter(|e| e.fault.kind() == kind).count(), 1, "{kind}");
+            assert_eq!(a.episodes[..8].iter().filter(|e| e.fault.kind() == kind).count(), 1, "{kind}");
         }
         for seed in 0..50 {
             let schedule = Schedule::generate(seed, 3, 2, 2000, &Fault::KINDS);
@@ -199,7 +263,9 @@ mod tests {
                     Fault::Loss { agents, .. } => agents.iter().copied().collect(),
                     Fault::OneWay { from, to, .. } => from.union(to).copied().collect(),
                     Fault::Partition { side } => side.iter().copied().collect(),
-                    Fault::Pause { agent } | Fault::Kill { agent, .. } => vec![*agent],
+                    Fault::Pause { agent } | Fault::Kill { agent, .. } | Fault::StopAtStart { agent, .. } => {
+                        vec![*agent]
+                    }
                     Fault::LateJoin { .. } => unreachable!(),
                 };
                 assert!(!touched.contains(&2), "seed {seed}: {}", episode.fault.describe());
