@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
-"""Per-hop figures from two cachegrind runs of `hop_cost` that differ only in their number of hops.
+"""Per-hop figures from two callgrind runs of `hop_cost` that differ only in their number of hops.
 
     hop-footprint.py SHORT.out LONG.out EXTRA_HOPS [TOP]
 
-Every cost that grows with the hops is a hop's: the difference between the runs, over the extra hops, is one hop's
-instructions and the cache lines it had to fetch from memory. The runs flush the simulated cache between hops
-(HOP_COST_FLUSH_MB), so those lines are what a hop touches when it starts cold: code lines (ILmr), data lines read
-(DLmr) and written (DLmw). The flush itself is left out. With TOP, the functions with most lines are listed.
+The runs collect inside the hop loops alone (the writer's loop, the receiving thread's), and every cost that grows
+with the hops is a hop's: the difference between the runs, over the extra hops, is one hop's instructions and the
+cache lines it had to fetch from memory. The runs flush the simulated cache between hops (HOP_COST_FLUSH_MB), so
+those lines are what a hop touches when it starts cold: code lines (ILmr), data lines read (DLmr) and written
+(DLmw). The flush itself is left out. With TOP, the functions with most lines are listed.
 """
 
 import collections
@@ -16,19 +17,38 @@ import sys
 FIELDS = ("Ir", "ILmr", "DLmr", "DLmw")
 
 
+def name(names, text):
+    """A file or function name of callgrind's output, which gives each once with a number and then the number."""
+    text = text.strip()
+    if text.startswith("("):
+        number, _, rest = text.partition(")")
+        if rest.strip():
+            names[number] = rest.strip()
+        return names.get(number, text)
+    return text
+
+
 def load(path):
-    """Costs by (file, function), summed over the lines of each."""
+    """Self costs by (file, function), summed over the lines of each (callgrind's format)."""
     costs = collections.defaultdict(lambda: collections.Counter())
-    events, file, function = None, None, None
+    events, file, function, skip = None, None, None, False
+    files, functions = {}, {}
     with open(path) as out:
         for line in out:
             if line.startswith("events:"):
                 events = line.split()[1:]
-            elif line.startswith("fl="):
-                file = line[3:].strip()
+            elif line.startswith(("fl=", "fi=", "fe=")):
+                file = name(files, line[3:])
             elif line.startswith("fn="):
-                function = line[3:].strip()
-            elif line[:1].isdigit() and events:
+                function = name(functions, line[3:])
+            elif line.startswith(("cfn=", "cfi=", "cfl=")):
+                name(functions if line.startswith("cfn=") else files, line.split("=", 1)[1])
+            elif line.startswith("calls="):
+                skip = True  # the next cost line is the call's inclusive cost, not this function's own
+            elif line[:1] in "0123456789+-*" and events:
+                if skip:
+                    skip = False
+                    continue
                 values = line.split()[1:]
                 counter = costs[(file, function)]
                 for event, value in zip(events, values):
