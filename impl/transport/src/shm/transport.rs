@@ -4,7 +4,7 @@
 //! receiver looks only at the lanes it was told of, until a look finds one empty: an empty look at a lane costs
 //! about as much as taking a sample from it (iceoryx2 goes through every publisher's connection), and looking at
 //! all four lanes before and after every sample was a third of a threaded agent's instructions per received update
-//! (`scripts/hop-instructions.sh`). Every publish wakes every other endpoint, and a wake-up stays pending until the
+//! (`scripts/hop-footprint.sh`). Every publish wakes every other endpoint, and a wake-up stays pending until the
 //! receiver's next wait takes it, so a sample that comes after a look is found at the next wait, at once. A wait
 //! that ends with no wake-up at all (its timeout) is followed by a look at every lane, and so is the first look of
 //! an endpoint: a sample whose wake-up never came (sent before this endpoint's listener existed, or a notification
