@@ -183,8 +183,16 @@ fn large_updates_travel_on_their_own_topic_and_no_small_one_overtakes_the_large_
     assert!(b.recv_timeout(Duration::from_millis(200)).is_none(), "nothing more: markers are consumed");
     let sent = a.stats().wire_bytes_sent - before.wire_bytes_sent;
     let marker = estimated_wire_bytes(16, true);
-    let expected = 30 * (estimated_wire_bytes(300_000, true) + marker) + 90 * estimated_wire_bytes(16, true);
-    assert_eq!(sent, expected as u64, "a large update counts its marker's bytes too");
+    let expected = (30 * (estimated_wire_bytes(300_000, true) + marker) + 90 * estimated_wire_bytes(16, true)) as u64;
+    // Discovery may still be matching the other topics: each match makes the next write first tell the peer where
+    // this transport's readers are, a 20-byte control sample on the requests topic (8 bytes of tag, a 12-byte GUID
+    // prefix; `transport::rtps`), counted too (CI once saw one: 132 bytes more).
+    let control = estimated_wire_bytes(20, true) as u64;
+    let extra = sent.checked_sub(expected).unwrap_or_else(|| panic!("{sent} bytes counted, {expected} written"));
+    assert!(
+        extra % control == 0 && extra <= 4 * control,
+        "a large update counts its marker's bytes too: {sent} bytes counted, {expected} for the updates"
+    );
 }
 
 #[test]
