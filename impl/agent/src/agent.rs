@@ -575,11 +575,12 @@ impl<T: Transport> Inner<T> {
                     if *alone && heard.is_empty() {
                         tracing::info!("{me}: no peer answered within {:?}; started alone", self.config.join_wait);
                     } else if *alone {
-                        // Peers were there, yet no graph came: a split brain until anti-entropy merges the graphs.
+                        // Peers were there, yet no graph came: a split brain until anti-entropy merges the
+                        // replicas (of one graph: the one named, or the one graph the peers were heard in).
                         tracing::warn!(
                             "{me}: started alone after {:?} although it heard {heard:?}: no graph answer came (a \
                              peer answers a repeated request only {:?} after the last; a join wait above that plus \
-                             a retry lets it)",
+                             a retry lets it); anti-entropy merges it with the agents of graph {graph} it hears",
                             self.config.join_wait,
                             self.config.answer_hold
                         );
@@ -596,6 +597,14 @@ impl<T: Transport> Inner<T> {
                 }
                 Event::SeedWarning { warning } => tracing::warn!("{me}: seed graph: {warning}"),
                 Event::SeedUnused => tracing::warn!("{me}: joined a running graph; the seed graph is not used"),
+                Event::SeveralGraphsHeard { graphs } => {
+                    let graphs: Vec<String> = graphs.iter().map(ToString::to_string).collect();
+                    tracing::warn!(
+                        "{me}: heard agents of graphs {} and no graph answer came: it cannot tell which to join, \
+                         so it starts a graph of its own; name the graph to join (`cortex agent --graph-id`)",
+                        graphs.join(", ")
+                    );
+                }
                 Event::Answered { .. } => {}
                 Event::Collision { detail } => {
                     tracing::error!("{me}: id collision: {detail}; local writes are refused")

@@ -27,6 +27,16 @@
 //! `0..2^16`, so two record-less lives that heard nothing of each other share a replica id with probability
 //! at most 2^-16. A reuse that becomes visible anyway — a peer holds operations of this life's replica id that this
 //! life did not make — is an id collision: reported, and local writes are refused from then on.
+//!
+//! **Graphs.** Every envelope carries its sender's graph id ([`GraphId`]); a life belongs to one graph and refuses
+//! every message of another ([`AgentCore::admit`]: counted, reported once per foreign graph as
+//! [`Event::ForeignGraph`], never merged), so agents of several graphs can share a DDS domain. A life's graph is the
+//! one its settings name ([`ProtocolConfig::graph`]); naming none, the graph of the first answer it takes; starting
+//! alone without one, the one graph that the agents it heard while it joined belong to (their announces and
+//! deltas; a joiner's graph request proves no graph), so that a joiner whose answers were lost or late — a DDS
+//! Security handshake can outlast the join wait — still merges with them by anti-entropy; and a graph of its own,
+//! its id drawn from the life's nonce ([`GraphId::from_nonce`]), when it heard none, or agents of several graphs
+//! ([`Event::SeveralGraphsHeard`]: it cannot tell which it was meant to join).
 
 mod input;
 mod join;
@@ -98,6 +108,9 @@ pub struct AgentCore {
     foreign_refused: u64,
     /// Messages refused for arriving on a channel that does not carry them ([`AgentCore::admit_channel`]).
     misrouted_refused: u64,
+    /// While joining without a named graph: the graphs of the agents heard (in the order first heard, at most
+    /// [`MAX_FOREIGN_GRAPHS`]), one of which a life that starts alone takes (see **Graphs**).
+    heard_graphs: Vec<GraphId>,
     /// Deltas received while joining, with their graph.
     buffered: VecDeque<(GraphId, AgentId, Arc<Delta>)>,
     collision: Option<String>,
@@ -134,6 +147,7 @@ impl AgentCore {
             foreign: BTreeSet::new(),
             foreign_refused: 0,
             misrouted_refused: 0,
+            heard_graphs: Vec::new(),
             buffered: VecDeque::new(),
             collision: None,
             next_announce_ns: now_ns,
@@ -438,6 +452,9 @@ impl AgentCore {
             return out;
         }
         // Admitted: `graph` is this life's, or any while joining without one (then a graph request may carry none).
+        if !matches!(input, Input::GraphRequest { .. }) {
+            self.hear_graph(graph);
+        }
         let tag = graph.or(self.graph).map(|graph| (graph, input.from()));
         self.peers.insert(input.from(), now_ns);
         match input {

@@ -6,8 +6,9 @@
 //! [`crate::core`], **Graphs**).
 //!
 //! A graph's id is chosen when the graph is created: given by its creator (`cortex agent --graph-id`), or drawn
-//! from the creating life's random nonce ([`GraphId::from_nonce`]) when it starts alone without one. A joiner that
-//! names no graph takes the id of the graph it joins. Written as 16 lower-case hexadecimal digits; never zero (zero
+//! from the creating life's random nonce ([`GraphId::from_nonce`]) when it starts alone without one and heard no
+//! agent of a graph while it waited. A joiner that names no graph takes the id of the graph it joins, or, starting
+//! alone after hearing agents of one graph, that graph's. Written as 16 lower-case hexadecimal digits; never zero (zero
 //! on the wire means "no graph yet", which only a joiner's graph request may say).
 
 use std::fmt;

@@ -378,6 +378,74 @@ fn a_life_that_starts_alone_naming_no_graph_creates_one_with_an_id_from_its_nonc
     assert_eq!(joiner.graph(), Some(GraphId::from_nonce(77)));
 }
 
+/// Agents `a` and `b` talk, every message delivered, from `from_ns` for `rounds` of their announce period.
+fn converse(a: &mut AgentCore, b: &mut AgentCore, from_ns: u64, rounds: u64) {
+    for round in 0..rounds {
+        let now = from_ns + round * 100_000_000;
+        talk(a, b, now);
+        talk(b, a, now);
+    }
+}
+
+/// `x`'s tick at `now_ns` reaches `y`, and they answer each other until nothing more is said.
+fn talk(x: &mut AgentCore, y: &mut AgentCore, now_ns: u64) {
+    let mut sends = x.tick(now_ns).sends;
+    while !sends.is_empty() {
+        let replies = exchange(&sends, y, now_ns);
+        sends = exchange(&replies.sends, x, now_ns).sends;
+    }
+}
+
+#[test]
+fn a_joiner_that_names_no_graph_and_gets_no_answer_starts_alone_in_the_one_graph_it_heard_and_merges_with_it() {
+    let mut a = ready_with_node(1, 0xa, "a");
+    let mut joiner = joiner(5, 50, None);
+    // It hears A's announce and a delta of A, but neither of its requests nor A's answers get through (lost, or
+    // a security handshake not yet done), until its join wait is over.
+    deliver(&a.tick(0).sends, &mut joiner);
+    let (_, written) =
+        a.write(2, |r, now| r.insert_node(now, NewNode::new("object", "a2")).map(|(_, d)| ((), vec![d]))).unwrap();
+    deliver(&written.sends(), &mut joiner);
+    let mut started = Vec::new();
+    while !joiner.is_ready() {
+        let now = joiner.next_deadline_ns();
+        started = joiner.tick(now).events;
+    }
+    assert!(started.iter().any(|e| matches!(e, Event::Ready { alone: true, .. })), "{started:?}");
+    assert_eq!(joiner.graph(), GraphId::new(0xa), "it starts alone in A's graph, not one of its own");
+    joiner
+        .write(6_000_000_000, |r, now| r.insert_node(now, NewNode::new("object", "mine")).map(|(_, d)| ((), vec![d])))
+        .unwrap();
+    // Once they hear each other, anti-entropy merges the two replicas of one graph.
+    converse(&mut a, &mut joiner, 6_100_000_000, 5);
+    assert_eq!(a.foreign_refused() + joiner.foreign_refused(), 0);
+    assert_eq!(joiner.replica().unwrap().digest(), a.replica().unwrap().digest());
+    let names = |core: &AgentCore| core.replica().unwrap().nodes().count();
+    assert_eq!((names(&a), names(&joiner)), (3, 3), "a, a2 and mine in both");
+}
+
+#[test]
+fn a_joiner_that_names_no_graph_and_hears_agents_of_two_graphs_but_no_answer_starts_a_graph_of_its_own() {
+    let mut a = ready_with_node(1, 0xa, "a");
+    let mut b = ready_with_node(2, 0xb, "b");
+    let mut joiner = joiner(5, 50, None);
+    deliver(&a.tick(0).sends, &mut joiner);
+    deliver(&b.tick(0).sends, &mut joiner);
+    // A joiner's graph request names no graph it has: it is not counted as one heard.
+    deliver(&self::joiner(6, 60, GraphId::new(0xc)).tick(0).sends, &mut joiner);
+    let mut events = Vec::new();
+    while !joiner.is_ready() {
+        let now = joiner.next_deadline_ns();
+        events.extend(joiner.tick(now).events);
+    }
+    assert_eq!(joiner.graph(), Some(GraphId::from_nonce(50)));
+    let several = events.iter().find_map(|e| match e {
+        Event::SeveralGraphsHeard { graphs } => Some(graphs.clone()),
+        _ => None,
+    });
+    assert_eq!(several, Some(vec![GraphId::new(0xa).unwrap(), GraphId::new(0xb).unwrap()]), "{events:?}");
+}
+
 /// Ticks `core` at each of its deadlines until it is ready; returns when it became ready.
 fn tick_until_ready(core: &mut AgentCore) -> u64 {
     let mut now = 0;

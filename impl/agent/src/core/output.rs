@@ -62,7 +62,8 @@ pub enum Event {
     /// This life became ready as `replica` of graph `graph`. The shell records `incarnation` (and the graph)
     /// before this life's first write.
     Ready {
-        /// The graph it belongs to: its own (named in the settings), the one it joined, or one it created alone.
+        /// The graph it belongs to: its own (named in the settings), the one it joined, the one graph it heard
+        /// its peers in when it started alone, or one it created alone.
         graph: GraphId,
         /// This life's replica id.
         replica: ReplicaId,
@@ -86,6 +87,12 @@ pub enum Event {
     },
     /// A running graph was joined, so the seed graph is not used.
     SeedUnused,
+    /// A life that names no graph starts alone after hearing agents of several graphs: it cannot tell which it
+    /// was meant to join, so it starts a graph of its own (see the core's **Graphs**).
+    SeveralGraphsHeard {
+        /// The graphs heard, in the order first heard.
+        graphs: Vec<GraphId>,
+    },
     /// A graph request was answered with a snapshot.
     Answered {
         /// The joiner.
