@@ -48,7 +48,8 @@ pub struct AgentArgs {
     /// The graph this agent belongs to (1 to 16 hex digits): it joins only this graph, refuses every other one on
     /// the domain and prefix, and creates it with this id if it starts alone. Without it, the agent takes the
     /// graph its previous life recorded in `--state-dir`, else the graph of the first agent that answers, else
-    /// (starting alone) a new graph with a random id. The id is in `--json-status` (`graph`).
+    /// (starting alone) the one graph it heard agents of while it waited, else a new graph with a random id. The
+    /// id is in `--json-status` (`graph`).
     #[arg(long)]
     pub graph_id: Option<GraphId>,
     /// Join with DDS Security, with the credentials in this directory (`DIR/NAME` of `cortex security init`):

@@ -19,7 +19,8 @@ pub struct AgentConfig {
     /// This agent's id (below [`AgentId::LIMIT`]).
     pub id: AgentId,
     /// The graph this agent belongs to ([`ProtocolConfig::graph`]). `None`: the graph its previous life recorded
-    /// in `life_file`, if any, else the graph it joins (or a new one, if it starts alone).
+    /// in `life_file`, if any, else the graph it joins (if it starts alone: the one graph it heard agents of, or
+    /// a new one).
     pub graph: Option<GraphId>,
     /// How long to wait for a graph from peers before starting alone.
     pub join_wait: Duration,
