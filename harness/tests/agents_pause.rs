@@ -90,3 +90,31 @@ fn a_joiner_stopped_while_it_joins_takes_the_running_graph_when_it_resumes() {
         joiner.wait_joined(nodes, Duration::from_secs(60));
     }
 }
+
+/// The only running agent stopped for longer than a joiner's whole join wait: the joiner, naming no graph, hears
+/// nobody and starts alone, in an unnamed graph of its own, and writes into it. Before unnamed graphs could move,
+/// the two graphs refused each other for good once the stopped agent resumed (reproduced on 2026-12-03 with the
+/// same steps by hand: 3 of 4 trials of a joiner that heard nothing stayed apart). Now one of the two moves to the
+/// other's graph and anti-entropy merges them.
+#[test]
+fn a_joiner_that_started_alone_while_the_running_agent_was_stopped_merges_with_it_when_it_resumes() {
+    let prefix = format!("pause_m{}", std::process::id());
+    let domain = 72;
+    let nodes = seed_nodes();
+    let mut seeded = spawn_seeded(domain, &prefix);
+    seeded.wait_ready_with(nodes);
+    common::signal(&seeded.child, "STOP");
+    let mut joiner = common::spawn(14, domain, &prefix, &["--join-wait-ms", "1000", "--insert-nodes", "3"]);
+    let alone = joiner.wait_for(
+        "ready alone with its 3 nodes",
+        Duration::from_secs(30),
+        |s| s.ready && s.nodes == 3,
+        |s| s.ready && s.nodes > 3,
+    );
+    common::signal(&seeded.child, "CONT");
+    assert!(alone.alone && !alone.graph_named, "{alone:?}");
+    assert_ne!(alone.graph, seeded.latest().and_then(|s| s.graph), "two graphs before the resume");
+    converge(&mut [&mut seeded, &mut joiner], nodes + 3);
+    let graphs = [seeded.latest().and_then(|s| s.graph), joiner.latest().and_then(|s| s.graph)];
+    assert_eq!(graphs[0], graphs[1], "one graph after the merge");
+}

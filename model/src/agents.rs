@@ -18,7 +18,8 @@
 //! operations is asked for at once; a delta received while joining is joined when the life becomes ready. And the
 //! bounded liveness property, checked from every state: **if the faults stop there** (the cut heals, nothing more
 //! is lost, crashed agents stay down), then within [`SETTLE_ROUNDS`] rounds of timers — each live agent's clock
-//! moves one join retry and it ticks, then every message is delivered — every live agent is ready, all have equal digests, each
+//! moves one join retry and it ticks, then every message is delivered — every live agent is ready, all are in one graph
+//! and have equal digests, each
 //! equals the reference specification ([`crate::spec`]) of the operations it has joined, and those include every
 //! write a live life made (nothing lost, nothing resurrected); and a joiner that still had a graph request to make
 //! before its join wait ran out, with a ready agent alive, becomes ready from that agent's graph, not alone.
@@ -70,6 +71,12 @@ pub struct AgentsConfig {
     /// ([`agent::core::ProtocolConfig::peer_forget_intervals`]). The running agents wait 4; the model's default, 1,
     /// lets the checker's few ticks reach a forgetting, so that the interval's changes with it are checked too.
     pub peer_forget_intervals: u64,
+    /// Whether the agents name no graph (`cortex agent` without `--graph-id`): each first life takes the graph of
+    /// whoever answers, and one that starts alone under a cut makes a graph of its own, unnamed, which moves once
+    /// the agents hear each other (`agent::core`, **Graphs**). A restarted agent names the graph its previous life
+    /// recorded, as the shell does (only a named graph is recorded). Off, every agent names the one graph, as the
+    /// agents of one deployment do.
+    pub unnamed: bool,
     /// A planted protocol bug (with the `mutants` feature).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mutant: Option<String>,
@@ -87,6 +94,7 @@ impl Default for AgentsConfig {
             history: 2,
             announce_group: agent::config::DEFAULT_ANNOUNCE_GROUP,
             peer_forget_intervals: 1,
+            unnamed: false,
             mutant: None,
             #[cfg(feature = "mutants")]
             planted: None,
@@ -114,14 +122,11 @@ impl AgentsConfig {
         }
     }
 
-    /// The protocol settings of agent `index`.
-    fn protocol(&self, index: usize) -> ProtocolConfig {
+    /// The protocol settings of agent `index`, whose previous life recorded graph `recorded` (if named).
+    fn protocol(&self, index: usize, recorded: Option<agent::GraphId>) -> ProtocolConfig {
         ProtocolConfig {
             id: AgentId(index as u32 + 1),
-            // Every agent names the one graph, as the agents of one deployment do (`cortex agent --graph-id`, or the
-            // graph a previous life recorded): a first life that named none and started alone under a cut would
-            // create a graph of its own, which by design never merges (`agent::core`, **Graphs**).
-            graph: Some(MODEL_GRAPH),
+            graph: if self.unnamed { recorded } else { Some(MODEL_GRAPH) },
             join_wait_ns: if index == 0 { 0 } else { JOIN_WAIT_NS },
             join_retry_ns: RETRY_NS,
             announce_period_ns: ANNOUNCE_NS,
@@ -168,6 +173,8 @@ pub struct Slot {
     pub now_ns: u64,
     /// The incarnation its lives recorded (the shell's life file).
     pub record: Option<u32>,
+    /// The graph its lives recorded: the latest life's, when named.
+    pub recorded_graph: Option<agent::GraphId>,
     /// Lives started so far.
     pub lives: u32,
     /// Dots of deltas received while the current life was joining.
@@ -274,6 +281,8 @@ pub enum Witness {
     SnapshotAnswer,
     /// An agent forgot a silent peer.
     PeerForgotten,
+    /// A life whose graph was unnamed moved to another graph.
+    GraphMoved,
 }
 
 /// A step the checker chooses.
@@ -333,7 +342,8 @@ impl AgentsModel {
         // The nonce tells lives apart; the record is what the previous life wrote.
         let life =
             LifeSeed { nonce: (index as u64 + 1) << 32 | u64::from(slot.lives), recorded_incarnation: slot.record };
-        slot.core = Some(AgentCore::new(self.config.protocol(index), life, None, slot.now_ns));
+        let config = self.config.protocol(index, slot.recorded_graph);
+        slot.core = Some(AgentCore::new(config, life, None, slot.now_ns));
         slot.early.clear();
         slot.stopped_joining = false;
     }
@@ -373,9 +383,15 @@ impl AgentsModel {
                 Event::GapRequest { .. } => {
                     state.witnessed.insert(Witness::GapRequest);
                 }
-                Event::Ready { replica, incarnation, alone, .. } => {
+                Event::Ready { graph, replica, incarnation, alone, named, .. } => {
+                    state.slots[from].recorded_graph = named.then_some(*graph);
                     self.on_ready(state, from, *replica, *incarnation, *alone)
                 }
+                Event::GraphMoved { graph, named, .. } => {
+                    state.slots[from].recorded_graph = named.then_some(*graph);
+                    state.witnessed.insert(Witness::GraphMoved);
+                }
+                Event::GraphNamed { graph, .. } => state.slots[from].recorded_graph = Some(*graph),
                 _ => {}
             }
         }
@@ -567,6 +583,7 @@ impl Model for AgentsModel {
                 core: None,
                 now_ns: 0,
                 record: None,
+                recorded_graph: None,
                 lives: 0,
                 early: BTreeSet::new(),
                 stopped: false,
@@ -730,6 +747,11 @@ impl Model for AgentsModel {
                 s.spent == Budgets { duplicates: s.spent.duplicates, ticks: s.spent.ticks, ..*c }
             }),
         ];
+        if self.config.unnamed {
+            properties.push(Property::sometimes(properties::W_MOVED, |_, s: &AgentsState| {
+                s.witnessed.contains(&Witness::GraphMoved)
+            }));
+        }
         if self.config.budgets.stops > 0 {
             properties.push(Property::sometimes(properties::W_STOPPED_JOINED, |_, s: &AgentsState| {
                 s.lives.iter().any(|l| l.stopped_joining && !l.alone)
@@ -788,6 +810,11 @@ impl AgentsModel {
         let live: Vec<&AgentCore> = end.slots.iter().filter_map(|s| s.core.as_ref()).collect();
         if let Some(core) = live.iter().find(|c| !c.is_ready()) {
             return Err(format!("{} is not ready after {SETTLE_ROUNDS} rounds", core.id()));
+        }
+        if let Some(pair) = live.windows(2).find(|pair| pair[0].graph() != pair[1].graph()) {
+            let graph = |core: &AgentCore| core.graph().map_or_else(|| "none".to_string(), |g| g.to_string());
+            let (a, b) = (pair[0], pair[1]);
+            return Err(format!("{} is in graph {}, {} in graph {}", a.id(), graph(a), b.id(), graph(b)));
         }
         let replicas: Vec<&dsr::Replica> = live.iter().filter_map(|c| c.replica()).collect();
         if let Some(pair) = replicas.windows(2).find(|pair| pair[0].digest() != pair[1].digest()) {
@@ -894,7 +921,7 @@ pub mod properties {
     /// Early deltas.
     pub const EARLY_KEPT: &str = "a delta received while joining is joined when the life becomes ready";
     /// Bounded liveness.
-    pub const SETTLES: &str = "faults stop here => within 6 timer rounds all live agents ready, equal, equal to the specification, no live write lost";
+    pub const SETTLES: &str = "faults stop here => within 6 timer rounds all live agents ready, in one graph, equal, equal to the specification, no live write lost";
     /// Joiners.
     pub const JOINER_SERVED: &str = "faults stop here => a joiner with a ready peer alive joins its graph, not alone";
     /// Witness.
@@ -907,6 +934,8 @@ pub mod properties {
     pub const W_SNAPSHOT: &str = "a missing-request is answered with a snapshot";
     /// Witness.
     pub const W_FORGOTTEN: &str = "an agent forgets a silent peer";
+    /// Witness, with [`super::AgentsConfig::unnamed`].
+    pub const W_MOVED: &str = "a life whose graph is unnamed moves to another graph";
     /// Witness.
     pub const W_ALONE: &str = "a life starts alone while another agent is ready";
     /// Witness.

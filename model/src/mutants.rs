@@ -191,6 +191,11 @@ pub fn agent_mutant_configs() -> Vec<(ProtocolMutant, AgentsConfig, &'static str
                 }
                 // A joiner stopped before its peer's answer came.
                 ProtocolMutant::JoinWaitCountsAbsence => (with(Budgets { stops: 1, ..none }), p::JOINER_SERVED),
+                // Agents naming no graph, the joiner starting alone before the first agent's first tick: two
+                // unnamed graphs, one of which must move.
+                ProtocolMutant::UnnamedGraphNeverMoves => {
+                    (AgentsConfig { unnamed: true, ..with(Budgets { ticks: 5, ..none }) }, p::SETTLES)
+                }
             };
             (mutant, config.with_mutant(mutant), property)
         })

@@ -135,6 +135,11 @@ struct AgentsArgs {
     /// its few ticks reach a forgetting; 0: never).
     #[arg(long, default_value_t = 1)]
     peer_forget_intervals: u64,
+    /// The agents name no graph (`cortex agent` without `--graph-id`): a first life that starts alone makes an
+    /// unnamed graph of its own, which must move once the agents hear each other. Without it every agent names
+    /// the one graph.
+    #[arg(long)]
+    unnamed: bool,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -213,6 +218,7 @@ pub fn run(args: CheckArgs) -> Result<()> {
                 },
                 announce_group: args.announce_group,
                 peer_forget_intervals: args.peer_forget_intervals,
+                unnamed: args.unnamed,
                 ..Default::default()
             };
             if let Some(address) = args.common.explore {

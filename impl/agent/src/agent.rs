@@ -296,6 +296,7 @@ impl<T: Transport + 'static> Agent<T> {
             ready: core.is_ready(),
             collision: core.collision().map(str::to_owned),
             graph: core.graph(),
+            graph_named: core.graph_named(),
             foreign_refused: core.foreign_refused(),
             foreign_graphs: core.foreign_graphs().iter().copied().collect(),
             misrouted_refused: core.misrouted_refused(),
@@ -329,6 +330,7 @@ impl<T: Transport + 'static> Agent<T> {
             ready: status.ready,
             alone: status.ready && status.join.alone,
             graph: status.graph,
+            graph_named: status.graph_named,
             foreign_refused: status.foreign_refused,
             foreign_graphs: status.foreign_graphs,
             misrouted_refused: status.misrouted_refused,
@@ -547,6 +549,20 @@ impl<T: Transport> Inner<T> {
         tracing::error!("{}: dropped a {what} from {origin}: {error}", self.me());
     }
 
+    /// Records the incarnation of `replica`, this life's, and its graph when named, in the life file (if any).
+    fn record_life(&self, replica: dsr::ReplicaId, graph: Option<crate::GraphId>) {
+        let Some(path) = &self.config.life_file else { return };
+        let incarnation = AgentId::incarnation_of(replica);
+        if let Err(error) = crate::life::record(path, incarnation, graph) {
+            tracing::error!(
+                "{}: cannot record incarnation {incarnation} in {}: {error}; a later life started alone may reuse \
+                 replica {replica}",
+                self.me(),
+                path.display()
+            );
+        }
+    }
+
     /// Tells a person, counts and records what the core reported (under the state lock: a new life's incarnation
     /// is recorded before the life can write).
     fn report(&self, locked: &mut Locked, events: &[Event], origin: &dyn std::fmt::Display) {
@@ -561,16 +577,8 @@ impl<T: Transport> Inner<T> {
                     timeline.last_request_ns = Some(now);
                     timeline.requests += 1;
                 }
-                Event::Ready { graph, replica, incarnation, alone, seed_nodes } => {
-                    if let Some(path) = &self.config.life_file
-                        && let Err(error) = crate::life::record(path, *incarnation, *graph)
-                    {
-                        tracing::error!(
-                            "{me}: cannot record incarnation {incarnation} in {}: {error}; a later life started \
-                             alone may reuse replica {replica}",
-                            path.display()
-                        );
-                    }
+                Event::Ready { graph, replica, incarnation, alone, named, seed_nodes } => {
+                    self.record_life(*replica, named.then_some(*graph));
                     let heard: Vec<AgentId> = locked.core.peers().collect();
                     if *alone && heard.is_empty() {
                         tracing::info!("{me}: no peer answered within {:?}; started alone", self.config.join_wait);
@@ -630,10 +638,32 @@ impl<T: Transport> Inner<T> {
                 }
                 Event::ForeignGraph { graph, from, kind, mine } => {
                     let mine = mine.map_or_else(|| "none yet".to_string(), |g| g.to_string());
+                    let moves = if locked.core.graph_named() {
+                        ""
+                    } else {
+                        " (this agent's graph is unnamed: it moves to a named graph, or to a smaller unnamed id, it \
+                         hears announced)"
+                    };
                     tracing::warn!(
                         "{me}: refused a {kind} of graph {graph} from {from} ({origin}): this agent's graph is \
-                         {mine}; every message of graph {graph} is refused and counted, without another warning"
+                         {mine}; every message of graph {graph} is refused and counted, without another warning{moves}"
                     );
+                }
+                Event::GraphMoved { left, graph, by, named } => {
+                    if let Some(replica) = locked.core.replica().map(Replica::id) {
+                        self.record_life(replica, named.then_some(*graph));
+                    }
+                    let what = if *named { "named" } else { "unnamed, with a smaller id" };
+                    tracing::warn!(
+                        "{me}: left its unnamed graph {left} for graph {graph} ({what}) announced by {by} ({origin}); \
+                         anti-entropy merges the two copies"
+                    );
+                }
+                Event::GraphNamed { graph, by } => {
+                    if let Some(replica) = locked.core.replica().map(Replica::id) {
+                        self.record_life(replica, Some(*graph));
+                    }
+                    tracing::info!("{me}: graph {graph} is named ({by} names it); this agent stays in it");
                 }
             }
         }

@@ -38,6 +38,7 @@
 //! its id drawn from the life's nonce ([`GraphId::from_nonce`]), when it heard none, or agents of several graphs
 //! ([`Event::SeveralGraphsHeard`]: it cannot tell which it was meant to join).
 
+mod graphs;
 mod input;
 mod join;
 mod lives;
@@ -102,6 +103,8 @@ pub struct AgentCore {
     incarnation_floor: u32,
     /// The graph this life belongs to (see **Graphs**); `None` only while joining without a named graph.
     graph: Option<GraphId>,
+    /// Whether `graph` is named (see **Graphs**): an unnamed one may still move.
+    named: bool,
     /// Foreign graph ids seen (each reported once), at most [`MAX_FOREIGN_GRAPHS`].
     foreign: BTreeSet<GraphId>,
     /// Messages of other graphs refused.
@@ -137,6 +140,7 @@ impl AgentCore {
     pub fn new(config: ProtocolConfig, life: LifeSeed, seed: Option<CortexGraph>, now_ns: u64) -> Self {
         AgentCore {
             graph: config.graph,
+            named: config.graph.is_some(),
             config,
             life,
             replica: None,
@@ -177,6 +181,12 @@ impl AgentCore {
         self.graph
     }
 
+    /// Whether this life's graph is named (see **Graphs**): named in its settings, taken from an agent whose graph
+    /// is named, or heard named since. An unnamed graph may still move.
+    pub fn graph_named(&self) -> bool {
+        self.named
+    }
+
     /// Messages of other graphs refused so far.
     pub fn foreign_refused(&self) -> u64 {
         self.foreign_refused
@@ -203,37 +213,6 @@ impl AgentCore {
     /// The foreign graph ids seen (at most [`MAX_FOREIGN_GRAPHS`]).
     pub fn foreign_graphs(&self) -> &BTreeSet<GraphId> {
         &self.foreign
-    }
-
-    /// Whether a message of kind `kind` carrying `graph` from `from` belongs to this life's graph. A foreign one
-    /// is counted and, the first time its graph id is seen, reported in `out`. A message with no graph id is
-    /// admitted only if it is a graph request; one of any graph is admitted while this life joins without a
-    /// named graph (its deltas are buffered with their graph until it knows its own).
-    pub fn admit(&mut self, graph: Option<GraphId>, from: AgentId, kind: &'static str, out: &mut Output) -> bool {
-        let Some(theirs) = graph else { return kind == "graph-request" };
-        match self.graph {
-            None => true,
-            Some(mine) if mine == theirs => true,
-            mine => {
-                self.refuse_foreign(theirs, from, kind, mine, out);
-                false
-            }
-        }
-    }
-
-    fn refuse_foreign(
-        &mut self,
-        theirs: GraphId,
-        from: AgentId,
-        kind: &'static str,
-        mine: Option<GraphId>,
-        out: &mut Output,
-    ) {
-        self.foreign_refused += 1;
-        if !self.foreign.contains(&theirs) && self.foreign.len() < MAX_FOREIGN_GRAPHS {
-            self.foreign.insert(theirs);
-            out.events.push(Event::ForeignGraph { graph: theirs, from, kind, mine });
-        }
     }
 
     /// This life's nonce.
@@ -420,6 +399,7 @@ impl AgentCore {
                 replica: replica_id,
                 applied,
                 digest,
+                named: self.named,
             };
             out.send(announce, Dest::All);
             self.next_announce_ns = if self.config.plant.is(ProtocolMutant::AnnounceTimerLost) {
@@ -448,6 +428,9 @@ impl AgentCore {
     /// graph is refused (see **Graphs**).
     pub fn handle(&mut self, now_ns: u64, graph: Option<GraphId>, input: Input) -> Output {
         let mut out = Output::default();
+        if let Input::Announce { from, named, .. } = &input {
+            self.follow_graph(graph, *from, *named, now_ns, &mut out);
+        }
         if !self.admit(graph, input.from(), input.kind(), &mut out) {
             return out;
         }
@@ -462,7 +445,7 @@ impl AgentCore {
                 self.gap_request(from, &delta, now_ns, &mut out);
                 self.apply("delta", tag, vec![delta], &mut out);
             }
-            Input::Announce { from, nonce, replica, applied, digest } => {
+            Input::Announce { from, nonce, replica, applied, digest, .. } => {
                 self.note_incarnations(&applied, &mut out);
                 if from == self.id() {
                     self.check_collision(nonce, Some(replica), "announce", &mut out);
@@ -486,14 +469,16 @@ impl AgentCore {
                     self.answer_graph_request(from, nonce, now_ns, &mut out);
                 }
             }
-            Input::GraphAnswer { nonce, snapshot, .. } => {
+            Input::GraphAnswer { nonce, named, snapshot, .. } => {
                 if nonce == self.life.nonce && self.replica.is_none() {
-                    // The first answer names the graph of a joiner that named none (unless it is refused).
-                    let named = self.graph;
-                    self.graph = named.or(graph);
+                    // The first answer gives its graph to a joiner that named none (unless it is refused), named
+                    // if the answerer's is.
+                    let (before, named_before) = (self.graph, self.named);
+                    self.graph = before.or(graph);
+                    self.named |= named;
                     self.become_ready(now_ns, Some(snapshot), &mut out);
                     if self.replica.is_none() {
-                        self.graph = named;
+                        (self.graph, self.named) = (before, named_before);
                     }
                 }
             }

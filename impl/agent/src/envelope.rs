@@ -37,8 +37,9 @@ pub enum CallFault {
 /// First byte of every envelope: a foreign sample on our topics is recognised at once.
 pub const MAGIC: u8 = 0xD5;
 /// The envelope version this build writes and reads (2: the graph id in the header; 3: an announce's digest is
-/// optional, and asking goes on the requests channel).
-pub const VERSION: u8 = 3;
+/// optional, and asking goes on the requests channel; 4: announces and graph answers say whether their sender's
+/// graph is named).
+pub const VERSION: u8 = 4;
 /// Bytes of the header: magic, version, kind, graph id.
 pub const HEADER_BYTES: usize = 11;
 /// Most version-vector entries in a carried context.
@@ -73,6 +74,9 @@ pub enum Message {
         /// compared with nothing). Equal applied sets with different digests would be a bug in the replica; the
         /// receiver logs it as an error and repairs with whole states.
         digest: Option<[u8; 32]>,
+        /// Whether the announcer's graph is named (`agent::core`, **Graphs**): an agent whose graph is unnamed
+        /// moves to the graph of a named announce it hears.
+        named: bool,
     },
     /// "Send me what I lack": sent to a peer whose announce showed dots the sender has not seen.
     MissingRequest {
@@ -118,6 +122,8 @@ pub enum Message {
         to: AgentId,
         /// The joiner's nonce, echoed (an answer meant for an earlier life is ignored).
         nonce: u64,
+        /// Whether the answerer's graph is named: the joiner's graph is then named too.
+        named: bool,
         /// Encoded snapshot.
         snapshot: Bytes,
     },
@@ -224,8 +230,8 @@ impl WireContext {
     }
 }
 
-/// An announce's fields on the wire: from, nonce, replica, applied operations, digest of a still graph.
-type WireAnnounce = (u32, u64, u32, WireContext, Option<[u8; 32]>);
+/// An announce's fields on the wire: from, nonce, replica, applied operations, digest of a still graph, named.
+type WireAnnounce = (u32, u64, u32, WireContext, Option<[u8; 32]>, bool);
 
 /// A byte slice that postcard writes as one length-prefixed block (not byte by byte).
 struct Block<'a>(&'a [u8]);
@@ -372,8 +378,8 @@ impl Message {
                 out.extend_from_slice(delta);
                 out
             }
-            Message::Announce { from, nonce, replica, applied, digest } => {
-                put(header(K_ANNOUNCE), &(from.0, nonce, replica.0, WireContext::of(applied), digest))
+            Message::Announce { from, nonce, replica, applied, digest, named } => {
+                put(header(K_ANNOUNCE), &(from.0, nonce, replica.0, WireContext::of(applied), digest, named))
             }
             Message::MissingRequest { from, to, applied, full } => {
                 put(header(K_MISSING_REQUEST), &(from.0, to.0, WireContext::of(applied), full))
@@ -388,8 +394,8 @@ impl Message {
                 out
             }
             Message::GraphRequest { from, nonce } => put(header(K_GRAPH_REQUEST), &(from.0, nonce)),
-            Message::GraphAnswer { from, to, nonce, snapshot } => {
-                let mut out = put(header(K_GRAPH_ANSWER), &(from.0, to.0, nonce));
+            Message::GraphAnswer { from, to, nonce, named, snapshot } => {
+                let mut out = put(header(K_GRAPH_ANSWER), &(from.0, to.0, nonce, named));
                 out.extend_from_slice(snapshot);
                 out
             }
@@ -453,7 +459,7 @@ impl Message {
                 Message::Delta { from: AgentId(from), delta: tail(rest) }
             }
             K_ANNOUNCE => {
-                let ((from, nonce, replica, context, digest), rest): (WireAnnounce, _) =
+                let ((from, nonce, replica, context, digest, named), rest): (WireAnnounce, _) =
                     postcard::take_from_bytes(body).map_err(take)?;
                 whole(rest)?;
                 if replica == 0 {
@@ -465,6 +471,7 @@ impl Message {
                     replica: ReplicaId(replica),
                     applied: context.into_context(name)?,
                     digest,
+                    named,
                 }
             }
             K_MISSING_REQUEST => {
@@ -500,11 +507,12 @@ impl Message {
                 Message::GraphRequest { from: AgentId(from), nonce }
             }
             K_GRAPH_ANSWER => {
-                let ((from, to, nonce), rest): ((u32, u32, u64), _) = postcard::take_from_bytes(body).map_err(take)?;
+                let ((from, to, nonce, named), rest): ((u32, u32, u64, bool), _) =
+                    postcard::take_from_bytes(body).map_err(take)?;
                 if rest.is_empty() {
                     return Err(malformed("no snapshot bytes".into()));
                 }
-                Message::GraphAnswer { from: AgentId(from), to: AgentId(to), nonce, snapshot: tail(rest) }
+                Message::GraphAnswer { from: AgentId(from), to: AgentId(to), nonce, named, snapshot: tail(rest) }
             }
             K_CALL_REQUEST => {
                 let ((from, to, call, method, args), rest): ((u32, u32, u64, String, &[u8]), _) =
@@ -542,12 +550,25 @@ mod tests {
         let (from, to) = (AgentId(3), AgentId(4));
         vec![
             Message::Delta { from, delta: Bytes::from(d2.encode()) },
-            Message::Announce { from, nonce: 99, replica: ReplicaId(7), applied: ctx.clone(), digest: Some([3; 32]) },
+            Message::Announce {
+                from,
+                nonce: 99,
+                replica: ReplicaId(7),
+                applied: ctx.clone(),
+                digest: Some([3; 32]),
+                named: true,
+            },
             Message::MissingRequest { from, to, applied: ctx, full: true },
             Message::Deltas { from, to, deltas: vec![Bytes::from(d1.encode()), Bytes::from(d2.encode())] },
             Message::Snapshot { from, to, snapshot: Bytes::from(replica.snapshot().encode()) },
             Message::GraphRequest { from, nonce: 1 },
-            Message::GraphAnswer { from, to, nonce: 1, snapshot: Bytes::from(replica.snapshot().encode()) },
+            Message::GraphAnswer {
+                from,
+                to,
+                nonce: 1,
+                named: false,
+                snapshot: Bytes::from(replica.snapshot().encode()),
+            },
             Message::CallRequest {
                 from,
                 to,

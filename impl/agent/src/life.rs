@@ -1,8 +1,9 @@
 //! The incarnation record: one small file per agent id and graph, where each life writes its incarnation before it
 //! writes to the graph, so the next life on this host takes a higher one even when no peer is reachable (see the
 //! crate's **Identity**). The file holds the number in decimal and a newline, then the id of the graph that life
-//! belonged to (`graph <16 hex digits>`; files written before graph ids have no such line), so a restarted agent
-//! that names no graph rejoins its own rather than creating a new one. It is replaced atomically (written beside,
+//! belonged to (`graph <16 hex digits>`) when that graph is named (`agent::core`, **Graphs**; files written before
+//! graph ids, and lives of an unnamed graph, have no such line), so a restarted agent that names no graph rejoins
+//! its own rather than creating a new one. It is replaced atomically (written beside,
 //! synced, renamed), so a crash leaves the old record or the new one, never a torn one.
 
 use std::io::Write;
@@ -50,13 +51,14 @@ fn read(path: &Path) -> Result<Option<(u32, Option<GraphId>)>, String> {
 }
 
 /// Records `incarnation` and `graph` in `path` (creating its directory), durably; the incarnation recorded is
-/// never lowered.
+/// never lowered. `graph` is `None` for a life whose graph is unnamed (`agent::core`, **Graphs**): such a graph
+/// may still move, so no later life should name it.
 ///
 /// # Errors
 /// The directory or file cannot be written (the message names the path).
-pub fn record(path: &Path, incarnation: u32, graph: GraphId) -> Result<(), String> {
+pub fn record(path: &Path, incarnation: u32, graph: Option<GraphId>) -> Result<(), String> {
     let current = read(path).ok().flatten();
-    if current.is_some_and(|(at, recorded)| at >= incarnation && recorded == Some(graph)) {
+    if current.is_some_and(|(at, recorded)| at >= incarnation && recorded == graph) {
         return Ok(());
     }
     let incarnation = incarnation.max(current.map_or(0, |(at, _)| at));
@@ -66,7 +68,8 @@ pub fn record(path: &Path, incarnation: u32, graph: GraphId) -> Result<(), Strin
     }
     let temporary = path.with_extension(format!("tmp{}", std::process::id()));
     let mut file = std::fs::File::create(&temporary).map_err(|e| context("creating a file beside", e))?;
-    writeln!(file, "{incarnation}\ngraph {graph}")
+    let graph_line = graph.map(|graph| format!("graph {graph}\n")).unwrap_or_default();
+    write!(file, "{incarnation}\n{graph_line}")
         .and_then(|()| file.sync_all())
         .map_err(|e| context("writing beside", e))?;
     std::fs::rename(&temporary, path).map_err(|e| context("replacing", e))
@@ -82,13 +85,16 @@ mod tests {
         let path = dir.join("nested").join("a1.life");
         let graph = GraphId::from_nonce(1);
         assert_eq!(recorded(&path), Ok(None));
-        record(&path, 3, graph).unwrap();
+        record(&path, 3, Some(graph)).unwrap();
         assert_eq!(recorded(&path), Ok(Some(3)));
         assert_eq!(recorded_graph(&path), Ok(Some(graph)));
-        record(&path, 2, graph).unwrap();
+        record(&path, 2, Some(graph)).unwrap();
         assert_eq!(recorded(&path), Ok(Some(3)));
-        record(&path, 7, graph).unwrap();
+        record(&path, 7, Some(graph)).unwrap();
         assert_eq!(recorded(&path), Ok(Some(7)));
+        // An unnamed graph is not recorded: the next life names none.
+        record(&path, 8, None).unwrap();
+        assert_eq!((recorded(&path), recorded_graph(&path)), (Ok(Some(8)), Ok(None)));
         std::fs::write(&path, "4\n").unwrap();
         assert_eq!((recorded(&path), recorded_graph(&path)), (Ok(Some(4)), Ok(None)));
         std::fs::write(&path, "seven\n").unwrap();

@@ -23,11 +23,14 @@ pub enum ProtocolMutant {
     /// A joining life counts the time its process was stopped against its join wait: resumed, it starts alone at
     /// once beside peers it had no chance to hear (the join wait's discount, `AgentCore::joining_since_ns`, lost).
     JoinWaitCountsAbsence,
+    /// A life whose graph is unnamed never moves to the graph of an announce it hears: an agent that started alone
+    /// beside peers it could not hear keeps a graph of its own for good.
+    UnnamedGraphNeverMoves,
 }
 
 impl ProtocolMutant {
     /// Every mutant.
-    pub const ALL: [ProtocolMutant; 7] = [
+    pub const ALL: [ProtocolMutant; 8] = [
         ProtocolMutant::NoGapRequest,
         ProtocolMutant::IncarnationForgotten,
         ProtocolMutant::DropEarlyDelta,
@@ -35,6 +38,7 @@ impl ProtocolMutant {
         ProtocolMutant::JoinRequestOnce,
         ProtocolMutant::PendingAskNeverExpires,
         ProtocolMutant::JoinWaitCountsAbsence,
+        ProtocolMutant::UnnamedGraphNeverMoves,
     ];
 }
 

@@ -61,6 +61,8 @@ pub struct AgentStatus {
     pub collision: Option<String>,
     /// The graph this agent belongs to (`None` while it joins without naming one).
     pub graph: Option<GraphId>,
+    /// Whether that graph is named; an unnamed one may still move (see `crate::core`, **Graphs**).
+    pub graph_named: bool,
     /// Messages of other graphs refused (see `crate::core`, **Graphs**).
     pub foreign_refused: u64,
     /// The foreign graph ids heard (at most `crate::core::MAX_FOREIGN_GRAPHS`).
@@ -128,6 +130,10 @@ pub struct StatusLine {
     /// The graph it belongs to (`None` while it joins without naming one).
     #[serde(default)]
     pub graph: Option<GraphId>,
+    /// Whether that graph is named: named with `--graph-id`, recorded by a previous life, or taken from an agent
+    /// whose graph is named. An unnamed graph may still move to a named one, or to a smaller unnamed id, it hears.
+    #[serde(default)]
+    pub graph_named: bool,
     /// Messages of other graphs on the same domain and topic prefix refused (never merged).
     #[serde(default)]
     pub foreign_refused: u64,

@@ -422,6 +422,91 @@ fn a_joiner_that_names_no_graph_and_gets_no_answer_starts_alone_in_the_one_graph
     assert_eq!(joiner.replica().unwrap().digest(), a.replica().unwrap().digest());
     let names = |core: &AgentCore| core.replica().unwrap().nodes().count();
     assert_eq!((names(&a), names(&joiner)), (3, 3), "a, a2 and mine in both");
+    assert!(joiner.graph_named(), "A's announces name the graph the joiner took unnamed");
+}
+
+/// A life of agent `id` that named no graph, heard nobody and started alone, holding one node named `name`.
+fn alone_unnamed_with_node(id: u32, nonce: u64, name: &str) -> AgentCore {
+    let mut core = joiner(id, nonce, None);
+    let ready_ns = tick_until_ready(&mut core);
+    core.write(ready_ns, |r, now| r.insert_node(now, NewNode::new("object", name)).map(|(_, d)| ((), vec![d])))
+        .unwrap();
+    assert_eq!((core.graph(), core.graph_named()), (Some(GraphId::from_nonce(nonce)), false));
+    core
+}
+
+fn moves(events: &[Event]) -> Vec<(GraphId, GraphId, bool)> {
+    events
+        .iter()
+        .filter_map(|event| match event {
+            Event::GraphMoved { left, graph, named, .. } => Some((*left, *graph, *named)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Like [`converse`], collecting the events of `b`.
+fn converse_events(a: &mut AgentCore, b: &mut AgentCore, from_ns: u64, rounds: u64) -> Vec<Event> {
+    let mut events = Vec::new();
+    for round in 0..rounds {
+        let now = from_ns + round * 100_000_000;
+        events.extend(talk_events(a, b, now).1);
+        events.extend(talk_events(b, a, now).0);
+    }
+    events
+}
+
+/// [`talk`], returning the events of `x` and of `y`.
+fn talk_events(x: &mut AgentCore, y: &mut AgentCore, now_ns: u64) -> (Vec<Event>, Vec<Event>) {
+    let (mut of_x, mut of_y) = (Vec::new(), Vec::new());
+    let mut sends = x.tick(now_ns).sends;
+    while !sends.is_empty() {
+        let replies = exchange(&sends, y, now_ns);
+        let back = exchange(&replies.sends, x, now_ns);
+        of_y.extend(replies.events);
+        of_x.extend(back.events);
+        sends = back.sends;
+    }
+    (of_x, of_y)
+}
+
+#[test]
+fn a_life_alone_in_an_unnamed_graph_moves_to_the_named_graph_it_hears_and_merges_with_it() {
+    // The joiner heard nobody within its join wait (the agent of graph A stopped, cut off, or still
+    // authenticating) and started a graph of its own; once they hear each other it moves to A, and A stays.
+    let mut a = ready_with_node(1, 0xa, "a");
+    let mut joiner = alone_unnamed_with_node(5, 50, "mine");
+    let left = joiner.graph().unwrap();
+    let events = converse_events(&mut a, &mut joiner, 6_000_000_000, 5);
+    assert_eq!(moves(&events), [(left, GraphId::new(0xa).unwrap(), true)], "{events:?}");
+    assert_eq!((a.graph(), joiner.graph(), joiner.graph_named()), (GraphId::new(0xa), GraphId::new(0xa), true));
+    assert_eq!(joiner.replica().unwrap().digest(), a.replica().unwrap().digest());
+    assert_eq!(a.replica().unwrap().nodes().count(), 2, "a and mine in both");
+    assert!(a.foreign_graphs().is_empty() || a.foreign_graphs().contains(&left));
+    assert!(joiner.foreign_graphs().is_empty(), "the graph it moved to is no longer foreign");
+}
+
+#[test]
+fn two_lives_alone_in_unnamed_graphs_end_in_the_one_with_the_smaller_id_and_stay_unnamed() {
+    let mut x = alone_unnamed_with_node(5, 50, "x");
+    let mut y = alone_unnamed_with_node(6, 60, "y");
+    let smaller = x.graph().min(y.graph());
+    let events = converse_events(&mut x, &mut y, 6_000_000_000, 5);
+    let events_x = converse_events(&mut y, &mut x, 6_500_000_000, 2);
+    assert_eq!((x.graph(), y.graph()), (smaller, smaller));
+    assert_eq!(moves(&events).len() + moves(&events_x).len(), 1, "one of them moved, once");
+    assert!(!x.graph_named() && !y.graph_named());
+    assert_eq!(x.replica().unwrap().digest(), y.replica().unwrap().digest());
+    assert_eq!(x.replica().unwrap().nodes().count(), 2);
+}
+
+#[test]
+fn a_named_graph_never_moves_to_an_unnamed_one_however_small_its_id() {
+    let mut a = ready_with_node(1, u64::MAX, "a");
+    let mut joiner = alone_unnamed_with_node(5, 50, "mine");
+    let events = converse_events(&mut joiner, &mut a, 6_000_000_000, 3);
+    assert!(moves(&events).is_empty(), "{events:?}");
+    assert_eq!((a.graph(), joiner.graph()), (GraphId::new(u64::MAX), GraphId::new(u64::MAX)));
 }
 
 #[test]
@@ -512,6 +597,7 @@ fn a_peer_with_the_same_operations_and_another_digest_is_asked_for_a_whole_state
         replica: dsr::ReplicaId(2),
         applied: applied.clone(),
         digest,
+        named: true,
     };
     let quiet = a.handle(1, graph_g(), announce(None));
     assert!(!quiet.events.iter().any(|e| matches!(e, Event::DigestMismatch { .. })), "{:?}", quiet.events);

@@ -30,6 +30,8 @@ pub enum Input {
         applied: CausalContext,
         /// Its digest, when its graph is still.
         digest: Option<[u8; 32]>,
+        /// Whether its graph is named.
+        named: bool,
     },
     /// A missing-request addressed to this agent.
     MissingRequest {
@@ -67,6 +69,8 @@ pub enum Input {
         from: AgentId,
         /// The nonce it echoes.
         nonce: u64,
+        /// Whether its graph is named.
+        named: bool,
         /// The graph.
         snapshot: Arc<Delta>,
     },
@@ -101,8 +105,8 @@ impl Input {
         };
         let input = match message {
             Message::Delta { from, delta: bytes } => delta("delta", &bytes).map(|delta| Input::Delta { from, delta }),
-            Message::Announce { from, nonce, replica, applied, digest } => {
-                Some(Input::Announce { from, nonce, replica, applied, digest })
+            Message::Announce { from, nonce, replica, applied, digest, named } => {
+                Some(Input::Announce { from, nonce, replica, applied, digest, named })
             }
             Message::MissingRequest { from, applied, full, .. } => Some(Input::MissingRequest { from, applied, full }),
             Message::Deltas { from, deltas, .. } => {
@@ -113,8 +117,8 @@ impl Input {
                 delta("snapshot", &snapshot).map(|snapshot| Input::Snapshot { from, snapshot })
             }
             Message::GraphRequest { from, nonce } => Some(Input::GraphRequest { from, nonce }),
-            Message::GraphAnswer { from, nonce, snapshot, .. } => {
-                delta("graph answer", &snapshot).map(|snapshot| Input::GraphAnswer { from, nonce, snapshot })
+            Message::GraphAnswer { from, nonce, named, snapshot, .. } => {
+                delta("graph answer", &snapshot).map(|snapshot| Input::GraphAnswer { from, nonce, named, snapshot })
             }
             Message::CallRequest { .. } | Message::CallReply { .. } => None,
         };

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use dsr::{Delta, Replica};
 
-use super::{AgentCore, Caches, Dest, Event, MAX_ANSWERED, MAX_FOREIGN_GRAPHS, Output};
+use super::{AgentCore, Caches, Dest, Event, MAX_ANSWERED, Output};
 use crate::AgentId;
 use crate::envelope::Message;
 use crate::graph_id::GraphId;
@@ -26,32 +26,8 @@ impl AgentCore {
             self.answered.insert((from, nonce), now_ns);
         }
         out.events.push(Event::Answered { to: from, snapshot_bytes: snapshot.len(), from_cache });
-        let answer = Message::GraphAnswer { from: self.config.id, to: from, nonce, snapshot };
+        let answer = Message::GraphAnswer { from: self.config.id, to: from, nonce, named: self.named, snapshot };
         out.send(answer, Dest::Sender);
-    }
-
-    /// While joining without a named graph, notes the graph of an admitted message (none for a joiner's graph
-    /// request, which proves no graph).
-    pub(super) fn hear_graph(&mut self, graph: Option<GraphId>) {
-        let Some(graph) = graph.filter(|_| self.graph.is_none()) else { return };
-        if !self.heard_graphs.contains(&graph) && self.heard_graphs.len() < MAX_FOREIGN_GRAPHS {
-            self.heard_graphs.push(graph);
-        }
-    }
-
-    /// The graph a life that names none starts alone: the one graph its peers were heard in, so that anti-entropy
-    /// merges what it writes with theirs once they hear each other; a graph of its own (its id drawn from the
-    /// life's nonce) when it heard none, or several and cannot tell which it was meant to join.
-    fn graph_to_start(&self, out: &mut Output) -> GraphId {
-        match self.heard_graphs.as_slice() {
-            [graph] => *graph,
-            heard => {
-                if !heard.is_empty() {
-                    out.events.push(Event::SeveralGraphsHeard { graphs: heard.to_vec() });
-                }
-                GraphId::from_nonce(self.life.nonce)
-            }
-        }
     }
 
     /// Creates this life's replica from a graph answer (or alone, from the seed), then applies what was buffered
@@ -69,11 +45,11 @@ impl AgentCore {
         replica.set_log_limits(self.config.log_limits);
         replica.set_change_tracking(self.change_tracking);
         let alone = snapshot.is_none();
-        let graph = match self.graph {
-            Some(graph) => graph,
-            None => self.graph_to_start(out),
-        };
-        self.graph = Some(graph);
+        if self.graph.is_none() {
+            let (graph, named) = self.graph_to_start(out);
+            (self.graph, self.named) = (Some(graph), named);
+        }
+        let graph = self.graph.unwrap_or_else(|| GraphId::from_nonce(self.life.nonce));
         let mut seed_nodes = None;
         if let Some(snapshot) = snapshot {
             if let Err(error) = replica.apply_shared(snapshot) {
@@ -93,7 +69,8 @@ impl AgentCore {
                 Err(error) => out.events.push(Event::SeedRefused { error: error.to_string() }),
             }
         }
-        out.events.push(Event::Ready { graph, replica: replica.id(), incarnation, alone, seed_nodes });
+        let named = self.named;
+        out.events.push(Event::Ready { graph, replica: replica.id(), incarnation, alone, named, seed_nodes });
         self.replica = Some(replica);
         self.caches.0 = Caches::default();
         // Deltas buffered from another graph while this life did not know its own are refused now.

@@ -71,8 +71,30 @@ pub enum Event {
         incarnation: u32,
         /// Whether it started alone (no graph answer within the join wait).
         alone: bool,
+        /// Whether its graph is named (see the core's **Graphs**): the shell records an unnamed graph for no later
+        /// life, since it may still move.
+        named: bool,
         /// Nodes of the seed graph imported, when it started alone from one.
         seed_nodes: Option<usize>,
+    },
+    /// This life, whose graph was unnamed, moved to the graph of an announce it heard: a named graph, or an
+    /// unnamed one with a smaller id (see the core's **Graphs**). Anti-entropy then merges the two copies.
+    GraphMoved {
+        /// The graph it left.
+        left: GraphId,
+        /// The graph it belongs to now.
+        graph: GraphId,
+        /// The announcer heard.
+        by: AgentId,
+        /// Whether the graph it belongs to now is named (the shell records it then, as at [`Event::Ready`]).
+        named: bool,
+    },
+    /// This life's unnamed graph turned out to be named: it heard a named agent of it. It stays in it for good.
+    GraphNamed {
+        /// The graph.
+        graph: GraphId,
+        /// The named agent heard.
+        by: AgentId,
     },
     /// The seed graph could not be imported; the life starts empty.
     SeedRefused {
@@ -88,7 +110,7 @@ pub enum Event {
     /// A running graph was joined, so the seed graph is not used.
     SeedUnused,
     /// A life that names no graph starts alone after hearing agents of several graphs: it cannot tell which it
-    /// was meant to join, so it starts a graph of its own (see the core's **Graphs**).
+    /// was meant to join, so it starts a graph of its own, named (it never moves; see the core's **Graphs**).
     SeveralGraphsHeard {
         /// The graphs heard, in the order first heard.
         graphs: Vec<GraphId>,
