@@ -74,7 +74,7 @@ pub struct AgentsConfig {
     /// Whether the agents name no graph (`cortex agent` without `--graph-id`): each first life takes the graph of
     /// whoever answers, and one that starts alone under a cut makes a graph of its own, unnamed, which moves once
     /// the agents hear each other (`agent::core`, **Graphs**). A restarted agent names the graph its previous life
-    /// recorded, as the shell does (only a named graph is recorded). Off, every agent names the one graph, as the
+    /// recorded if named, as the shell does, and starts alone in an unnamed one it recorded if it hears no graph. Off, every agent names the one graph, as the
     /// agents of one deployment do.
     pub unnamed: bool,
     /// A planted protocol bug (with the `mutants` feature).
@@ -173,8 +173,8 @@ pub struct Slot {
     pub now_ns: u64,
     /// The incarnation its lives recorded (the shell's life file).
     pub record: Option<u32>,
-    /// The graph its lives recorded: the latest life's, when named.
-    pub recorded_graph: Option<agent::GraphId>,
+    /// The graph its lives recorded: the latest life's, and whether it is named.
+    pub recorded_graph: Option<(agent::GraphId, bool)>,
     /// Lives started so far.
     pub lives: u32,
     /// Dots of deltas received while the current life was joining.
@@ -340,9 +340,13 @@ impl AgentsModel {
     fn new_life(&self, index: usize, slot: &mut Slot) {
         slot.lives += 1;
         // The nonce tells lives apart; the record is what the previous life wrote.
-        let life =
-            LifeSeed { nonce: (index as u64 + 1) << 32 | u64::from(slot.lives), recorded_incarnation: slot.record };
-        let config = self.config.protocol(index, slot.recorded_graph);
+        let nonce = (index as u64 + 1) << 32 | u64::from(slot.lives);
+        let (named, unnamed) = match slot.recorded_graph {
+            Some((graph, true)) => (Some(graph), None),
+            other => (None, other.map(|(graph, _)| graph)),
+        };
+        let life = LifeSeed { nonce, recorded_incarnation: slot.record, recorded_graph: unnamed };
+        let config = self.config.protocol(index, named);
         slot.core = Some(AgentCore::new(config, life, None, slot.now_ns));
         slot.early.clear();
         slot.stopped_joining = false;
@@ -384,14 +388,14 @@ impl AgentsModel {
                     state.witnessed.insert(Witness::GapRequest);
                 }
                 Event::Ready { graph, replica, incarnation, alone, named, .. } => {
-                    state.slots[from].recorded_graph = named.then_some(*graph);
+                    state.slots[from].recorded_graph = Some((*graph, *named));
                     self.on_ready(state, from, *replica, *incarnation, *alone)
                 }
                 Event::GraphMoved { graph, named, .. } => {
-                    state.slots[from].recorded_graph = named.then_some(*graph);
+                    state.slots[from].recorded_graph = Some((*graph, *named));
                     state.witnessed.insert(Witness::GraphMoved);
                 }
-                Event::GraphNamed { graph, .. } => state.slots[from].recorded_graph = Some(*graph),
+                Event::GraphNamed { graph, .. } => state.slots[from].recorded_graph = Some((*graph, true)),
                 _ => {}
             }
         }

@@ -199,15 +199,18 @@ impl<T: Transport + 'static> Agent<T> {
             }),
             (None, None) => None,
         };
+        let mut recorded_graph = None;
         if config.graph.is_none()
             && let Some(path) = &config.life_file
         {
-            config.graph = crate::life::recorded_graph(path).unwrap_or_else(|error| {
-                tracing::error!("{}: cannot read the graph record {}: {error}", config.id, path.display());
-                None
-            });
+            match crate::life::recorded_graph(path) {
+                Ok(Some((graph, true))) => config.graph = Some(graph),
+                Ok(unnamed) => recorded_graph = unnamed.map(|(graph, _)| graph),
+                Err(error) => tracing::error!("{}: cannot read the graph record {}: {error}", config.id, path.display()),
+            }
         }
-        let mut core = AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation }, seed, now);
+        let life = LifeSeed { nonce, recorded_incarnation, recorded_graph };
+        let mut core = AgentCore::new(config.protocol(), life, seed, now);
         // Nobody listens yet: a subscription or callback turns the report of changes on.
         core.set_change_tracking(false);
         let state = Locked {
@@ -549,11 +552,11 @@ impl<T: Transport> Inner<T> {
         tracing::error!("{}: dropped a {what} from {origin}: {error}", self.me());
     }
 
-    /// Records the incarnation of `replica`, this life's, and its graph when named, in the life file (if any).
-    fn record_life(&self, replica: dsr::ReplicaId, graph: Option<crate::GraphId>) {
+    /// Records the incarnation of `replica`, this life's, and its graph, named or not, in the life file (if any).
+    fn record_life(&self, replica: dsr::ReplicaId, graph: crate::GraphId, named: bool) {
         let Some(path) = &self.config.life_file else { return };
         let incarnation = AgentId::incarnation_of(replica);
-        if let Err(error) = crate::life::record(path, incarnation, graph) {
+        if let Err(error) = crate::life::record(path, incarnation, graph, named) {
             tracing::error!(
                 "{}: cannot record incarnation {incarnation} in {}: {error}; a later life started alone may reuse \
                  replica {replica}",
@@ -578,7 +581,7 @@ impl<T: Transport> Inner<T> {
                     timeline.requests += 1;
                 }
                 Event::Ready { graph, replica, incarnation, alone, named, seed_nodes } => {
-                    self.record_life(*replica, named.then_some(*graph));
+                    self.record_life(*replica, *graph, *named);
                     let heard: Vec<AgentId> = locked.core.peers().collect();
                     if *alone && heard.is_empty() {
                         tracing::info!("{me}: no peer answered within {:?}; started alone", self.config.join_wait);
@@ -651,7 +654,7 @@ impl<T: Transport> Inner<T> {
                 }
                 Event::GraphMoved { left, graph, by, named } => {
                     if let Some(replica) = locked.core.replica().map(Replica::id) {
-                        self.record_life(replica, named.then_some(*graph));
+                        self.record_life(replica, *graph, *named);
                     }
                     let what = if *named { "named" } else { "unnamed, with a smaller id" };
                     tracing::warn!(
@@ -661,7 +664,7 @@ impl<T: Transport> Inner<T> {
                 }
                 Event::GraphNamed { graph, by } => {
                     if let Some(replica) = locked.core.replica().map(Replica::id) {
-                        self.record_life(replica, Some(*graph));
+                        self.record_life(replica, *graph, true);
                     }
                     tracing::info!("{me}: graph {graph} is named ({by} names it); this agent stays in it");
                 }

@@ -48,13 +48,14 @@ impl AgentCore {
     }
 
     /// The graph a life that names none starts alone, and whether it is named: the one graph its peers were heard
-    /// in, unnamed (so that anti-entropy merges what it writes with theirs once they hear each other); a graph of its
-    /// own, its id drawn from the life's nonce, unnamed when it heard none, named when it heard several and cannot
-    /// tell which it was meant to join.
+    /// in, unnamed (so that anti-entropy merges what it writes with theirs once they hear each other); having heard
+    /// none, the unnamed graph of its previous life ([`super::LifeSeed::recorded_graph`]) or else a new one, its id
+    /// drawn from the life's nonce, unnamed; having heard several, a new one, named, since it cannot tell which it
+    /// was meant to join.
     pub(super) fn graph_to_start(&self, out: &mut Output) -> (GraphId, bool) {
         match self.heard_graphs.as_slice() {
             [graph] => (*graph, false),
-            [] => (GraphId::from_nonce(self.life.nonce), false),
+            [] => (self.life.recorded_graph.unwrap_or_else(|| GraphId::from_nonce(self.life.nonce)), false),
             heard => {
                 out.events.push(Event::SeveralGraphsHeard { graphs: heard.to_vec() });
                 (GraphId::from_nonce(self.life.nonce), true)

@@ -71,8 +71,8 @@ pub enum Event {
         incarnation: u32,
         /// Whether it started alone (no graph answer within the join wait).
         alone: bool,
-        /// Whether its graph is named (see the core's **Graphs**): the shell records an unnamed graph for no later
-        /// life, since it may still move.
+        /// Whether its graph is named (see the core's **Graphs**), recorded with it: the next life names a named
+        /// graph, and starts alone in an unnamed one only if it hears no graph.
         named: bool,
         /// Nodes of the seed graph imported, when it started alone from one.
         seed_nodes: Option<usize>,

@@ -76,4 +76,8 @@ pub struct LifeSeed {
     pub nonce: u64,
     /// The incarnation of this agent's previous life on this host, as the shell recorded it (`None`: no record).
     pub recorded_incarnation: Option<u32>,
+    /// The unnamed graph the previous life on this host belonged to, as the shell recorded it (a named one is
+    /// named in [`ProtocolConfig::graph`] instead): a life that starts alone having heard no graph starts in it
+    /// again, unnamed, so that what peers kept of the previous life's writes still belongs to its graph.
+    pub recorded_graph: Option<GraphId>,
 }
