@@ -72,3 +72,17 @@ fn a_joiner_stopped_while_it_joins_takes_the_peers_graph_when_it_resumes() {
     assert!(joined.holds, "no path resumes a stopped joiner into a peer's graph: {}", report.to_text());
     assert_eq!(report.unique_states, 57_032);
 }
+
+#[test]
+fn agents_that_name_no_graph_end_in_one_graph_after_a_cut_and_after_a_restart() {
+    // Unnamed, a joiner that starts alone (before the first agent's first tick, or under a cut) makes a graph of
+    // its own, and a restarted agent starts again in the unnamed graph it recorded; settling now requires one
+    // graph, so an unnamed graph that never moved would fail it (planted, `UnnamedGraphNeverMoves`: the mutant
+    // check kills it).
+    let unnamed = |budgets| AgentsConfig { unnamed: true, ..config(2, budgets) };
+    let cut = check(unnamed(Budgets { ticks: 6, cuts: 1, ..quiet() }));
+    let moved = cut.properties.iter().find(|p| p.name == model::agents::properties::W_MOVED).unwrap();
+    assert!(moved.holds, "no path moves an unnamed graph: {}", cut.to_text());
+    assert_eq!(cut.unique_states, 58_809);
+    assert_eq!(check(unnamed(Budgets { ticks: 5, crashes: 1, ..quiet() })).unique_states, 47_323);
+}

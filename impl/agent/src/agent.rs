@@ -206,7 +206,9 @@ impl<T: Transport + 'static> Agent<T> {
             match crate::life::recorded_graph(path) {
                 Ok(Some((graph, true))) => config.graph = Some(graph),
                 Ok(unnamed) => recorded_graph = unnamed.map(|(graph, _)| graph),
-                Err(error) => tracing::error!("{}: cannot read the graph record {}: {error}", config.id, path.display()),
+                Err(error) => {
+                    tracing::error!("{}: cannot read the graph record {}: {error}", config.id, path.display())
+                }
             }
         }
         let life = LifeSeed { nonce, recorded_incarnation, recorded_graph };

@@ -42,7 +42,8 @@ fn read(path: &Path) -> Result<Option<(u32, Option<(GraphId, bool)>)>, String> {
     let graph = match lines.next() {
         None => None,
         Some(line) => {
-            let not_graph = || format!("{}: second line {line:?} is not `graph <16 hex digits>[ unnamed]`", path.display());
+            let not_graph =
+                || format!("{}: second line {line:?} is not `graph <16 hex digits>[ unnamed]`", path.display());
             let id = line.strip_prefix("graph ").ok_or_else(not_graph)?;
             let (id, named) = match id.strip_suffix(" unnamed") {
                 Some(id) => (id, false),

@@ -16,7 +16,8 @@ fn graph_g() -> Option<GraphId> {
 /// A life of agent 3 of graph G that starts alone at its first tick.
 fn alone(nonce: u64, recorded_incarnation: Option<u32>) -> (AgentCore, Output) {
     let config = AgentConfig { join_wait: Duration::ZERO, graph: graph_g(), ..AgentConfig::new(AgentId(3)) };
-    let mut core = AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation, ..LifeSeed::default() }, None, 0);
+    let mut core =
+        AgentCore::new(config.protocol(), LifeSeed { nonce, recorded_incarnation, ..LifeSeed::default() }, None, 0);
     let out = core.tick(0);
     assert!(core.is_ready());
     (core, out)
@@ -147,14 +148,23 @@ fn a_graph_of_another_era_reaches_a_joiner_whose_dictionary_learns_its_names() {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cortex-graphs/shadow_beta.json");
     let reading = dsr::json::read(&std::fs::read(path).unwrap(), dsr::json::Strictness::Lenient).unwrap();
     let config = AgentConfig { join_wait: Duration::ZERO, ..AgentConfig::new(AgentId(3)) };
-    let mut seeded =
-        AgentCore::new(config.protocol(), LifeSeed { nonce: 5, recorded_incarnation: None, ..LifeSeed::default() }, Some(reading.graph), 0);
+    let mut seeded = AgentCore::new(
+        config.protocol(),
+        LifeSeed { nonce: 5, recorded_incarnation: None, ..LifeSeed::default() },
+        Some(reading.graph),
+        0,
+    );
     let out = seeded.tick(0);
     let warnings = out.events.iter().filter(|event| matches!(event, Event::SeedWarning { .. })).count();
     assert_eq!(warnings, 8, "{:?}", out.events);
 
     let config = AgentConfig { join_wait: Duration::from_secs(5), ..AgentConfig::new(AgentId(4)) };
-    let mut joiner = AgentCore::new(config.protocol(), LifeSeed { nonce: 6, recorded_incarnation: None, ..LifeSeed::default() }, None, 0);
+    let mut joiner = AgentCore::new(
+        config.protocol(),
+        LifeSeed { nonce: 6, recorded_incarnation: None, ..LifeSeed::default() },
+        None,
+        0,
+    );
     let request = joiner.tick(1);
     let answer = exchange(&request.sends, &mut seeded, 2);
     let joined = exchange(&answer.sends, &mut joiner, 3);
@@ -182,8 +192,12 @@ fn announcer(id: u32, group: u32) -> AgentCore {
         graph: graph_g(),
         ..AgentConfig::new(AgentId(id))
     };
-    let mut core =
-        AgentCore::new(config.protocol(), LifeSeed { nonce: u64::from(id), recorded_incarnation: None, ..LifeSeed::default() }, None, 0);
+    let mut core = AgentCore::new(
+        config.protocol(),
+        LifeSeed { nonce: u64::from(id), recorded_incarnation: None, ..LifeSeed::default() },
+        None,
+        0,
+    );
     core.tick(0);
     core
 }
@@ -277,8 +291,12 @@ fn joiner(id: u32, nonce: u64, graph: Option<GraphId>) -> AgentCore {
 /// A ready life of agent `id` of graph `graph` holding one node named `name`.
 fn ready_with_node(id: u32, graph: u64, name: &str) -> AgentCore {
     let config = AgentConfig { join_wait: Duration::ZERO, graph: GraphId::new(graph), ..AgentConfig::new(AgentId(id)) };
-    let mut core =
-        AgentCore::new(config.protocol(), LifeSeed { nonce: u64::from(id), recorded_incarnation: None, ..LifeSeed::default() }, None, 0);
+    let mut core = AgentCore::new(
+        config.protocol(),
+        LifeSeed { nonce: u64::from(id), recorded_incarnation: None, ..LifeSeed::default() },
+        None,
+        0,
+    );
     core.tick(0);
     core.write(1, |r, now| r.insert_node(now, NewNode::new("object", name)).map(|(_, d)| ((), vec![d]))).unwrap();
     core

@@ -16,7 +16,12 @@ const SECOND: u64 = 1_000_000_000;
 /// A life of agent `id` of the graph; `join_wait` zero starts it alone at its first tick.
 fn life(id: u32, join_wait: Duration, read_only: bool) -> AgentCore {
     let config = AgentConfig { join_wait, graph: GraphId::new(GRAPH), read_only, ..AgentConfig::new(AgentId(id)) };
-    AgentCore::new(config.protocol(), LifeSeed { nonce: u64::from(id) << 8, recorded_incarnation: None, ..LifeSeed::default() }, None, 0)
+    AgentCore::new(
+        config.protocol(),
+        LifeSeed { nonce: u64::from(id) << 8, recorded_incarnation: None, ..LifeSeed::default() },
+        None,
+        0,
+    )
 }
 
 /// A writer alone with one node named `name`.
