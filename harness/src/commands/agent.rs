@@ -48,8 +48,9 @@ pub struct AgentArgs {
     /// The graph this agent belongs to (1 to 16 hex digits): it joins only this graph, refuses every other one on
     /// the domain and prefix, and creates it with this id if it starts alone. Without it, the agent takes the
     /// graph its previous life recorded in `--state-dir`, else the graph of the first agent that answers, else
-    /// (starting alone) the one graph it heard agents of while it waited, else a new graph with a random id. The
-    /// id is in `--json-status` (`graph`).
+    /// (starting alone) the one graph it heard agents of while it waited, else a new graph with a random id; such
+    /// a graph is unnamed until it hears a named agent of it, and moves to a named graph, or an unnamed one with a
+    /// smaller id, that it hears announced. The id is in `--json-status` (`graph`, `graph_named`).
     #[arg(long)]
     pub graph_id: Option<GraphId>,
     /// Join with DDS Security, with the credentials in this directory (`DIR/NAME` of `cortex security init`):

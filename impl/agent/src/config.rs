@@ -18,9 +18,9 @@ pub const DEFAULT_ANNOUNCE_GROUP: u32 = 8;
 pub struct AgentConfig {
     /// This agent's id (below [`AgentId::LIMIT`]).
     pub id: AgentId,
-    /// The graph this agent belongs to ([`ProtocolConfig::graph`]). `None`: the graph its previous life recorded
-    /// in `life_file`, if any, else the graph it joins (if it starts alone: the one graph it heard agents of, or
-    /// a new one).
+    /// The graph this agent belongs to ([`ProtocolConfig::graph`]). `None`: the named graph its previous life
+    /// recorded in `life_file`, if any, else the graph it joins, else (starting alone) one unnamed, which may move
+    /// (`crate::core`, **Graphs**).
     pub graph: Option<GraphId>,
     /// How long to wait for a graph from peers before starting alone.
     pub join_wait: Duration,

@@ -30,13 +30,19 @@
 //!
 //! **Graphs.** Every envelope carries its sender's graph id ([`GraphId`]); a life belongs to one graph and refuses
 //! every message of another ([`AgentCore::admit`]: counted, reported once per foreign graph as
-//! [`Event::ForeignGraph`], never merged), so agents of several graphs can share a DDS domain. A life's graph is the
-//! one its settings name ([`ProtocolConfig::graph`]); naming none, the graph of the first answer it takes; starting
-//! alone without one, the one graph that the agents it heard while it joined belong to (their announces and
-//! deltas; a joiner's graph request proves no graph), so that a joiner whose answers were lost or late — a DDS
-//! Security handshake can outlast the join wait — still merges with them by anti-entropy; and a graph of its own,
-//! its id drawn from the life's nonce ([`GraphId::from_nonce`]), when it heard none, or agents of several graphs
-//! ([`Event::SeveralGraphsHeard`]: it cannot tell which it was meant to join).
+//! [`Event::ForeignGraph`], never merged), so agents of several graphs can share a DDS domain. A life's graph is
+//! *named* when its settings name it ([`ProtocolConfig::graph`]) or it took it from an agent whose graph is named;
+//! naming none, a life takes the graph of the first answer it takes; starting alone without one, the one graph that
+//! the agents it heard while it joined belong to (their announces and deltas; a joiner's graph request proves no
+//! graph), else the unnamed graph of its previous life ([`LifeSeed::recorded_graph`]), else a graph of its own, its
+//! id drawn from the life's nonce ([`GraphId::from_nonce`]) — all unnamed; and a graph of its own, named, when it
+//! heard agents of several graphs ([`Event::SeveralGraphsHeard`]: it cannot tell which it was meant to join). A
+//! named graph never moves. A life whose graph is unnamed moves to the graph of an announce it hears that is named,
+//! or unnamed with a smaller id ([`Event::GraphMoved`]; announces and answers carry the flag), and becomes named on
+//! a named announce of its own graph ([`Event::GraphNamed`]). So a joiner whose answers were lost or late — its
+//! only peer stopped or cut off, a DDS Security handshake that outlasted the join wait — still ends in one graph
+//! with its peers once they hear each other, and anti-entropy merges the copies: the named graph if there is one,
+//! else the smallest id among theirs.
 
 mod graphs;
 mod input;
@@ -284,7 +290,7 @@ impl AgentCore {
     /// more than a further join retry late finds a life that could not listen meanwhile — its process was stopped
     /// (SIGSTOP, a debugger) or starved of the CPU — so that time does not count against the join wait: the life
     /// asks again and waits out the rest, instead of starting alone at once beside peers it had no chance to hear
-    /// (a graph of its own that, unnamed, never merges with theirs).
+    /// (a graph of its own, which merges with theirs only once they hear each other).
     fn discount_absence(&mut self, now_ns: u64) {
         let due = self.last_request_ns.map_or(self.joining_since_ns, |at| at.saturating_add(self.config.join_retry_ns));
         let late_ns = now_ns.saturating_sub(due);

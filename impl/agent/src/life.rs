@@ -28,7 +28,10 @@ pub fn recorded_graph(path: &Path) -> Result<Option<(GraphId, bool)>, String> {
     Ok(read(path)?.and_then(|(_, graph)| graph))
 }
 
-fn read(path: &Path) -> Result<Option<(u32, Option<(GraphId, bool)>)>, String> {
+/// A record: the incarnation, and the graph with whether it is named.
+type Record = (u32, Option<(GraphId, bool)>);
+
+fn read(path: &Path) -> Result<Option<Record>, String> {
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
         Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
