@@ -21,7 +21,7 @@ fn mutants_chosen_on_the_command_line_are_killed_and_an_unknown_name_is_refused(
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let results: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON results");
     let results = results.as_array().unwrap();
-    assert_eq!(results.len(), 7, "the seven protocol mutants");
+    assert_eq!(results.len(), 8, "the eight protocol mutants");
     for result in results {
         assert!(result["mutant"].as_str().unwrap().starts_with("agent::"), "{result}");
         assert_eq!(result["killed"], true, "{result}");
