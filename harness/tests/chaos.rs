@@ -1,8 +1,9 @@
 //! `cortex chaos` end to end: a short seeded campaign on three real agent processes in network namespaces (every
 //! fault kind once: loss, one-way loss, a partition, a pause, a kill and restart with and without a reachable
-//! peer, a late joiner) converges after every heal, loses nothing, and ends with the graph the reference
-//! specification gives for the whole recorded history; it writes history.jsonl, verdict.json, the timeline figure
-//! and the summary. Needs root (network namespaces, nftables): `scripts/test.sh` runs the tests as root in CI and
+//! peer, a restart stopped in its start, a late joiner cut off from the others), its agents naming no graph,
+//! converges after every heal in one graph, loses nothing, and ends with the graph the reference specification
+//! gives for the whole recorded history; it writes history.jsonl, verdict.json, the timeline figure and the
+//! summary. The secured and same-host campaigns name their graph and have a late joiner that can reach the others. Needs root (network namespaces, nftables): `scripts/test.sh` runs the tests as root in CI and
 //! installs `nftables` and `iproute2` first; as another user the test says so and does nothing.
 
 use std::path::PathBuf;
@@ -11,6 +12,10 @@ use std::process::Command;
 fn is_root() -> bool {
     Command::new("id").arg("-u").output().is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
 }
+
+/// Every fault kind but the late joiner that can reach the others: the one joining alone makes an unnamed graph of its
+/// own, which it leaves, or the others leave theirs for it, at the heal.
+const FAULTS: &str = "loss,one-way loss,partition,pause,kill+restart,kill+restart alone,stop at start,late join alone";
 
 #[test]
 fn a_short_campaign_converges_after_every_fault_and_matches_the_specification() {
@@ -22,7 +27,7 @@ fn a_short_campaign_converges_after_every_fault_and_matches_the_specification() 
     let _ = std::fs::remove_dir_all(&out);
     let child = Command::new(env!("CARGO_BIN_EXE_cortex"))
         .args(["chaos", "--seed", "1", "--agents", "3", "--fault-ms", "1500", "--image-bytes", "65536"])
-        .args(["--settle-ms", "60000", "--domain", "44", "--out"])
+        .args(["--settle-ms", "60000", "--domain", "44", "--unnamed", "--faults", FAULTS, "--out"])
         .arg(&out)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -45,18 +50,10 @@ fn a_short_campaign_converges_after_every_fault_and_matches_the_specification() 
     assert_eq!(verdict["verdict"]["agents_compared"], 3);
     let kinds: Vec<&str> =
         verdict["episodes"].as_array().unwrap().iter().map(|e| e["kind"].as_str().unwrap()).collect();
-    for kind in [
-        "loss",
-        "one-way loss",
-        "partition",
-        "pause",
-        "kill+restart",
-        "kill+restart alone",
-        "stop at start",
-        "late join",
-    ] {
+    for kind in FAULTS.split(',') {
         assert!(kinds.contains(&kind), "{kind} missing from {kinds:?}");
     }
+    assert_eq!(verdict["config"]["unnamed"], true);
     assert!(verdict["episodes"].as_array().unwrap().iter().all(|e| e["heal_to_converge_ms"].is_f64()));
     for kind in ["insert_node", "delete_node", "insert_edge", "set_attr", "set_image"] {
         assert!(verdict["writes_by_kind"][kind].as_u64() > Some(0), "no {kind}: {verdict}");
@@ -71,6 +68,12 @@ fn a_short_campaign_converges_after_every_fault_and_matches_the_specification() 
     for signal in ["STOP", "CONT", "KILL"] {
         assert!(events.iter().any(|e| e["event"] == "signal" && e["signal"] == signal), "no {signal}");
     }
+    // The late joiner's graph and the others' became one: some agent left its unnamed graph.
+    let moved = (0..3).any(|slot| {
+        let log = std::fs::read_to_string(seed.join(format!("agents/a{slot}.log"))).unwrap();
+        log.contains("left its unnamed graph")
+    });
+    assert!(moved, "no agent's log says it left its graph");
     let svg = std::fs::read_to_string(seed.join("timeline.svg")).unwrap();
     assert!(svg.contains("partition") && svg.contains("agrees with the majority"));
     let summary: serde_json::Value =

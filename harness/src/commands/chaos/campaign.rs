@@ -116,6 +116,7 @@ impl Campaign {
             status_ms: 100,
             image_bytes: config.image_bytes,
             dir,
+            unnamed: config.unnamed,
             #[cfg(feature = "mutants")]
             plant: config.plant.clone(),
         };
@@ -244,6 +245,14 @@ impl Campaign {
         Ok(())
     }
 
+    /// Cuts `slot`'s namespace off from the others when `isolated`, until the heal.
+    fn isolate_if(&mut self, slot: usize, isolated: bool) -> Result<()> {
+        if isolated {
+            self.set_filters(&[(slot, Filter { isolated: true, ..Filter::default() })].into())?;
+        }
+        Ok(())
+    }
+
     fn set_filters(&mut self, filters: &BTreeMap<usize, Filter>) -> Result<()> {
         for slot in 0..self.slots.len() {
             let filter = filters.get(&slot).cloned().unwrap_or_default();
@@ -262,9 +271,7 @@ impl Campaign {
         match &episode.fault {
             Fault::Pause { agent } => self.signal(*agent, "STOP")?,
             Fault::Kill { agent, down_ms, isolated } => {
-                if *isolated {
-                    self.set_filters(&[(*agent, Filter { isolated: true, ..Filter::default() })].into())?;
-                }
+                self.isolate_if(*agent, *isolated)?;
                 self.drain(*agent)?;
                 self.signal(*agent, "KILL")?;
                 self.pump_for(Duration::from_millis(*down_ms))?;
@@ -274,7 +281,15 @@ impl Campaign {
                 self.wait_until(|c| c.ready(agent), Duration::from_millis(self.config.settle_ms))?;
                 self.pump_for(fault_for / 3)?;
             }
-            Fault::LateJoin { agent } => self.start(*agent)?,
+            Fault::LateJoin { agent, isolated: false } => self.start(*agent)?,
+            Fault::LateJoin { agent, isolated: true } => {
+                let agent = *agent;
+                self.isolate_if(agent, true)?;
+                self.start(agent)?;
+                // Heal only once it has started alone and has written for a while.
+                self.wait_until(|c| c.ready(agent), Duration::from_millis(self.config.settle_ms))?;
+                self.pump_for(fault_for / 3)?;
+            }
             Fault::StopAtStart { agent, down_ms, at, stopped_ms } => {
                 let agent = *agent;
                 self.drain(agent)?;
@@ -304,7 +319,7 @@ impl Campaign {
         // Heal.
         match &episode.fault {
             Fault::Pause { agent } => self.signal(*agent, "CONT")?,
-            Fault::LateJoin { .. } => {}
+            Fault::LateJoin { isolated: false, .. } => {}
             _ => self.set_filters(&BTreeMap::new())?,
         }
         self.writing = false;
@@ -333,7 +348,7 @@ impl Campaign {
         Ok(())
     }
 
-    /// Waits until every running agent has, after `since`, reported a graph with the same digest, and no write is
+    /// Waits until every running agent has, after `since`, reported the same graph with the same digest, and no write is
     /// outstanding. Returns the times from `since` until every running agent had heard every other one (all peers
     /// discovered) and until they agreed; `None` for what did not happen within the settle time.
     fn converge(&mut self, since: Instant) -> Result<(Option<Duration>, Option<Duration>)> {
@@ -365,20 +380,22 @@ impl Campaign {
         })
     }
 
+    /// Whether every running agent has reported, after `since`, the same graph with the same digest.
     fn agreed_since(&self, since: Instant) -> bool {
-        let mut digest = None;
+        let mut shown = None;
         for slot in self.running() {
             let s = &self.slots[slot];
             let Some((at, status)) = &s.status else { return false };
             if *at < since || !status.ready || s.outstanding.is_some() || status.digest.is_none() {
                 return false;
             }
-            if digest.is_some_and(|d| d != &status.digest) {
+            let this = (&status.graph, &status.digest);
+            if shown.is_some_and(|other| other != this) {
                 return false;
             }
-            digest = Some(&status.digest);
+            shown = Some(this);
         }
-        digest.is_some()
+        shown.is_some()
     }
 
     /// Pumps until `done` holds (true) or `timeout` passes (false).

@@ -4,7 +4,8 @@
 //!
 //! The rules, in order:
 //!
-//! 1. **Converged**: every agent running at the end has the same digest and has applied the same operations.
+//! 1. **Converged**: every agent running at the end is in the same graph, has the same digest and has applied the
+//!    same operations.
 //! 2. **Nothing lost**: every recorded write is among the applied operations, except a write of a killed life that
 //!    no surviving life had applied when it wrote (recorded in that write's `past`): such a write may have died
 //!    with its process before it left it (an agent keeps no durable log), and is counted, not failed.
@@ -96,6 +97,10 @@ pub fn op_records(writes: &[&WriteRecord]) -> Vec<OpRecord> {
         .collect()
 }
 
+fn graph_name(graph: Option<agent::GraphId>) -> String {
+    graph.map_or_else(|| "none".into(), |g| g.to_string())
+}
+
 /// Checks a campaign's record; `killed` are the replica ids of lives that were killed.
 pub fn check(writes: &[WriteRecord], killed: &[u32], finals: &[(usize, FinalState)]) -> Verdict {
     let mut verdict = Verdict { writes: writes.len(), agents_compared: finals.len(), ..Verdict::default() };
@@ -108,6 +113,13 @@ pub fn check(writes: &[WriteRecord], killed: &[u32], finals: &[(usize, FinalStat
         return verdict;
     };
     for (slot, state) in &finals[1..] {
+        if state.graph != first.graph {
+            verdict.violations.push(format!(
+                "agent {slot} ended in graph {}, agent {first_slot} in graph {}",
+                graph_name(state.graph),
+                graph_name(first.graph)
+            ));
+        }
         if state.full_digest.as_ref() != Some(digest) || state.applied.as_ref() != Some(applied) {
             verdict.violations.push(format!(
                 "agent {slot} ended with digest {} ({} nodes), agent {first_slot} with {} ({} nodes)",
@@ -266,6 +278,21 @@ mod tests {
         let (records, replicas) = simulate_withholding(1, 80, Some(40));
         let verdict = check(&records, &[], &finals(&replicas));
         assert!(verdict.violations.iter().any(|v| v.contains("ended with digest")), "{:?}", verdict.violations);
+    }
+
+    /// Two agents with equal graphs in different graph ids have not converged: they refuse each other's deltas.
+    #[test]
+    fn equal_graphs_in_two_graph_ids_are_caught() {
+        let (records, replicas) = simulate(3, 40);
+        let mut states = finals(&replicas);
+        for (slot, state) in &mut states {
+            state.graph = Some(agent::GraphId::from_nonce(if *slot == 2 { 9 } else { 5 }));
+        }
+        let verdict = check(&records, &[], &states);
+        assert_eq!(verdict.violations.len(), 1, "{:?}", verdict.violations);
+        assert!(verdict.violations[0].starts_with("agent 2 ended in graph"), "{:?}", verdict.violations);
+        states[2].1.graph = states[0].1.graph;
+        assert!(check(&records, &[], &states).passed());
     }
 
     #[test]

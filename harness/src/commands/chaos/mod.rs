@@ -86,8 +86,14 @@ pub struct ChaosArgs {
     /// network faults filter by namespace. Not with `--security` (shared memory would bypass it).
     #[arg(long, conflicts_with = "security")]
     pub same_host: bool,
+    /// Give the agents no graph id (as `cortex agent` runs without `--graph-id`): a life that starts alone makes an
+    /// unnamed graph of its own, and the lives that hear each other must end in one graph (an unnamed graph moves
+    /// to a smaller id it hears). Without this flag every agent runs with the campaign's `--graph-id`.
+    #[arg(long, conflicts_with = "security")]
+    pub unnamed: bool,
     /// The fault kinds to draw from (default: every kind, or with `--same-host` the process faults), e.g.
-    /// `--faults "stop at start,late join"`; the last agent starts only in a `late join`.
+    /// `--faults "stop at start,late join"`; the last agent starts only in a `late join` or a `late join alone` (one
+    /// of them per campaign, whichever the seeded order of the first round puts first).
     #[arg(long, value_delimiter = ',')]
     pub faults: Vec<String>,
     /// Plant this protocol bug in every agent (an `agent::mutants::ProtocolMutant` name, e.g.
@@ -189,6 +195,7 @@ fn run_one(
         domain: args.domain,
         security: args.security,
         same_host: args.same_host,
+        unnamed: args.unnamed,
         #[cfg(feature = "mutants")]
         plant: args.plant.clone(),
     };

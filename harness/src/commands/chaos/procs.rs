@@ -43,6 +43,8 @@ pub struct Launch {
     /// The campaign's PKI (`cortex security init`), when its agents run with DDS Security: slot N uses the
     /// credentials of [`identity`]`(N)`.
     pub security: Option<PathBuf>,
+    /// Start the agents without `--graph-id` (`cortex chaos --unnamed`).
+    pub unnamed: bool,
     /// A protocol bug to plant in every agent.
     #[cfg(feature = "mutants")]
     pub plant: Option<String>,
@@ -79,13 +81,15 @@ impl Proc {
             .arg("chaos-agent")
             .args(["--id", &slot.to_string(), "--domain", &launch.domain.to_string()])
             .args(["--join-wait-ms", &launch.join_wait_ms.to_string()])
-            // One graph, named: a life that starts alone (a restart with no reachable peer, a late join across a
-            // partition) is still of the campaign's graph.
-            .args(["--graph-id", &agent::GraphId::from_nonce(u64::from(launch.domain)).to_string()])
             .args(["--status-ms", &launch.status_ms.to_string()])
             .args(["--image-bytes", &launch.image_bytes.to_string()])
             .arg("--life-file")
             .arg(life_file(&launch.dir, slot));
+        // One graph, named: a life that starts alone (a restart with no reachable peer, a late join across a
+        // partition) is still of the campaign's graph. Unnamed, such a life makes a graph of its own that must move.
+        if !launch.unnamed {
+            command.args(["--graph-id", &agent::GraphId::from_nonce(u64::from(launch.domain)).to_string()]);
+        }
         if let Some(pki) = &launch.security {
             command.arg("--security").arg(pki.join(identity(slot)));
         }

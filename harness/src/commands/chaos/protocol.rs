@@ -49,6 +49,9 @@ pub enum Report {
 /// An agent's final state.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FinalState {
+    /// The graph it is in (`None`: no graph, or a state taken from a replica alone, as the checks' tests do).
+    #[serde(default)]
+    pub graph: Option<agent::GraphId>,
     /// The digest of its visible graph (the first 8 bytes, hex).
     pub digest: Option<String>,
     /// The full digest (32 bytes, hex), compared with the specification's.

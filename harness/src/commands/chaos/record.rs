@@ -33,6 +33,9 @@ pub struct CampaignConfig {
     /// Whether every agent ran in one network namespace, on one host to each other (`--same-host`).
     #[serde(default)]
     pub same_host: bool,
+    /// Whether the agents ran without a graph id (`--unnamed`).
+    #[serde(default)]
+    pub unnamed: bool,
     /// A protocol bug planted in every agent (tests of the campaign itself).
     #[cfg(feature = "mutants")]
     #[serde(default, skip_serializing_if = "Option::is_none")]

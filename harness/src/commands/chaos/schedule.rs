@@ -4,7 +4,8 @@
 //! A campaign is a sequence of episodes. In each, the writers run while one fault is on; then the fault heals, the
 //! writers stop, and the campaign measures the time until every running agent shows the same graph. Every round has
 //! one episode of each kind, in a seeded order; the last agent slot is started by the late-join episode of the
-//! first round (until then no fault touches it).
+//! first round (until then no fault touches it): `late join` or `late join alone`, whichever the seeded order puts
+//! first (the other is left out, since there is one late agent).
 
 use std::collections::BTreeSet;
 use std::fmt;
@@ -52,10 +53,15 @@ pub enum Fault {
         /// Whether no peer is reachable while it is down and after its restart.
         isolated: bool,
     },
-    /// The agent starts for the first time, while the others write.
+    /// The agent starts for the first time, while the others write. `isolated`: its namespace is cut off from the
+    /// start until the heal, so the new agent finds no peer and starts alone in a graph of its own (with `cortex
+    /// chaos --unnamed`, a new unnamed graph: one side must move to the other's at the heal).
     LateJoin {
         /// The joining agent.
         agent: usize,
+        /// Whether no peer is reachable when it starts.
+        #[serde(default)]
+        isolated: bool,
     },
     /// `SIGKILL`, a restart after `down_ms`, `SIGSTOP` of the new process during its start (`at`), `SIGCONT`
     /// `stopped_ms` later: the new life must not hang, and must take the running graph when it resumes (the time it
@@ -108,13 +114,14 @@ impl Fault {
             Fault::Pause { .. } => "pause",
             Fault::Kill { isolated: false, .. } => "kill+restart",
             Fault::Kill { isolated: true, .. } => "kill+restart alone",
-            Fault::LateJoin { .. } => "late join",
+            Fault::LateJoin { isolated: false, .. } => "late join",
+            Fault::LateJoin { isolated: true, .. } => "late join alone",
             Fault::StopAtStart { .. } => "stop at start",
         }
     }
 
     /// Every kind, in a fixed order.
-    pub const KINDS: [&'static str; 8] = [
+    pub const KINDS: [&'static str; 9] = [
         "loss",
         "one-way loss",
         "partition",
@@ -123,10 +130,11 @@ impl Fault {
         "kill+restart alone",
         "stop at start",
         "late join",
+        "late join alone",
     ];
 
     /// The kinds that need no network fault (what `cortex chaos --same-host` draws from): a kill whose new life is
-    /// isolated needs its namespace cut off.
+    /// or a late joiner that is isolated needs its namespace cut off.
     pub const PROCESS_KINDS: [&'static str; 4] = ["pause", "kill+restart", "stop at start", "late join"];
 
     /// A one-line description.
@@ -140,7 +148,9 @@ impl Fault {
             Fault::Kill { agent, down_ms, isolated } => {
                 format!("kill a{agent}, restart after {down_ms} ms{}", if *isolated { ", isolated" } else { "" })
             }
-            Fault::LateJoin { agent } => format!("late join a{agent}"),
+            Fault::LateJoin { agent, isolated } => {
+                format!("late join a{agent}{}", if *isolated { ", isolated" } else { "" })
+            }
             Fault::StopAtStart { agent, down_ms, at, stopped_ms } => {
                 format!("kill a{agent}, restart after {down_ms} ms, stop it {at} for {stopped_ms} ms")
             }
@@ -168,7 +178,8 @@ pub struct Schedule {
 
 impl Schedule {
     /// The schedule of `seed` for `agents` slots (at least 3), `rounds` rounds and faults of `fault_ms`, one fault of
-    /// each of `kinds` ([`Fault::KINDS`], or [`Fault::PROCESS_KINDS`]) per round (`late join` in the first round only).
+    /// each of `kinds` ([`Fault::KINDS`], or [`Fault::PROCESS_KINDS`]) per round; one late join in all, of the first
+    /// round (of the two late-join kinds, the one the round's seeded order puts first).
     pub fn generate(seed: u64, agents: usize, rounds: usize, fault_ms: u64, kinds: &[&'static str]) -> Schedule {
         assert!(agents >= 3, "a campaign needs at least 3 agents");
         let mut rng = SplitMix64::new(seed ^ 0xC4A0_5EED);
@@ -177,13 +188,13 @@ impl Schedule {
         let mut episodes = Vec::new();
         for round in 0..rounds {
             let mut kinds: Vec<&str> = kinds.to_vec();
-            if round > 0 {
-                kinds.retain(|k| *k != "late join");
-            }
             shuffle(&mut kinds, &mut rng);
+            // One late join: the first of the first round; the late agent runs from then on.
+            let mut joined = round > 0;
+            kinds.retain(|kind| !LATE_JOINS.contains(kind) || !std::mem::replace(&mut joined, true));
             for kind in kinds {
                 let fault = draw(kind, &running, late, fault_ms, &mut rng);
-                if let Fault::LateJoin { agent } = fault {
+                if let Fault::LateJoin { agent, .. } = fault {
                     running.push(agent);
                 }
                 episodes.push(Episode { fault, fault_ms });
@@ -192,6 +203,9 @@ impl Schedule {
         Schedule { agents, episodes }
     }
 }
+
+/// The kinds that start the late agent.
+const LATE_JOINS: [&str; 2] = ["late join", "late join alone"];
 
 fn shuffle<T>(items: &mut [T], rng: &mut SplitMix64) {
     for i in (1..items.len()).rev() {
@@ -238,7 +252,7 @@ fn draw(kind: &str, running: &[usize], late: usize, fault_ms: u64, rng: &mut Spl
             },
             stopped_ms: fault_ms / 2 + rng.range(0, fault_ms / 4),
         },
-        _ => Fault::LateJoin { agent: late },
+        _ => Fault::LateJoin { agent: late, isolated: kind == "late join alone" },
     }
 }
 
@@ -252,9 +266,18 @@ mod tests {
         assert_eq!(a, Schedule::generate(1, 4, 2, 3000, &Fault::KINDS));
         assert_ne!(a, Schedule::generate(2, 4, 2, 3000, &Fault::KINDS));
         assert_eq!(a.episodes.len(), 8 + 7);
-        for kind in Fault::KINDS {
-            assert_eq!(a.episodes[..8].iter().filter(|e| e.fault.kind() == kind).count(), 1, "{kind}");
+        for kind in Fault::KINDS.iter().filter(|k| !LATE_JOINS.contains(k)) {
+            assert_eq!(a.episodes[..8].iter().filter(|e| e.fault.kind() == *kind).count(), 1, "{kind}");
         }
+        let joins = |s: &Schedule| s.episodes.iter().filter(|e| matches!(e.fault, Fault::LateJoin { .. })).count();
+        assert_eq!(joins(&a), 1);
+        let isolated = (0..40)
+            .map(|seed| Schedule::generate(seed, 3, 1, 2000, &Fault::KINDS))
+            .filter(|s| s.episodes.iter().any(|e| e.fault.kind() == "late join alone"))
+            .count();
+        assert!((10..=30).contains(&isolated), "{isolated} of 40 seeds join alone");
+        let alone = Schedule::generate(1, 3, 1, 2000, &["partition", "late join alone"]);
+        assert_eq!(alone.episodes.iter().map(|e| e.fault.kind()).filter(|k| *k == "late join alone").count(), 1);
         for seed in 0..50 {
             let schedule = Schedule::generate(seed, 3, 2, 2000, &Fault::KINDS);
             let joined = schedule.episodes.iter().position(|e| matches!(e.fault, Fault::LateJoin { .. })).unwrap();

@@ -137,19 +137,22 @@ fn write(agent: &Agent<AgentTransport>, workload: Workload, seq: u64, draw: u64)
 }
 
 fn final_state(agent: &Agent<AgentTransport>) -> FinalState {
-    agent.read(final_state_of).unwrap_or(FinalState {
+    let state = agent.read(final_state_of).unwrap_or(FinalState {
+        graph: None,
         digest: None,
         full_digest: None,
         applied: None,
         nodes: 0,
         edges: 0,
-    })
+    });
+    FinalState { graph: agent.status().graph, ..state }
 }
 
-/// The final state of `replica`.
+/// The final state of `replica` (its graph id is the agent's, not the replica's: `None` here).
 pub fn final_state_of(replica: &dsr::Replica) -> FinalState {
     let digest = replica.digest();
     FinalState {
+        graph: None,
         digest: Some(digest.to_string()),
         full_digest: Some(digest.0.iter().map(|b| format!("{b:02x}")).collect()),
         applied: Some(replica.applied().clone()),
