@@ -88,7 +88,8 @@ pub struct ChaosArgs {
     pub same_host: bool,
     /// Give the agents no graph id (as `cortex agent` runs without `--graph-id`): a life that starts alone makes an
     /// unnamed graph of its own, and the lives that hear each other must end in one graph (an unnamed graph moves
-    /// to a smaller id it hears). Without this flag every agent runs with the campaign's `--graph-id`.
+    /// to a smaller id it hears). Without this flag every agent runs with the campaign's `--graph-id`. Not with
+    /// `--security`: a secured deployment names its graph (README, "Graph identity").
     #[arg(long, conflicts_with = "security")]
     pub unnamed: bool,
     /// The fault kinds to draw from (default: every kind, or with `--same-host` the process faults), e.g.

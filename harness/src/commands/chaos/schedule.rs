@@ -134,7 +134,7 @@ impl Fault {
     ];
 
     /// The kinds that need no network fault (what `cortex chaos --same-host` draws from): a kill whose new life is
-    /// or a late joiner that is isolated needs its namespace cut off.
+    /// isolated, and a late joiner that is, need its namespace cut off.
     pub const PROCESS_KINDS: [&'static str; 4] = ["pause", "kill+restart", "stop at start", "late join"];
 
     /// A one-line description.
