@@ -509,7 +509,7 @@ impl Campaign {
     }
 
     fn sample(&mut self) {
-        let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
+        let mut counts: BTreeMap<(Option<agent::GraphId>, &str), usize> = BTreeMap::new();
         let mut shown_by = 0;
         for slot in self.running() {
             if let Some((_, status)) = &self.slots[slot].status
@@ -517,19 +517,20 @@ impl Campaign {
                 && !self.slots[slot].paused
                 && let Some(digest) = &status.digest
             {
-                *counts.entry(digest).or_default() += 1;
+                *counts.entry((status.graph, digest)).or_default() += 1;
                 shown_by += 1;
             }
         }
-        // The digest more than half of the agents with a graph show; with no such majority, every agent differs.
-        let mode = counts.iter().find(|(_, n)| **n * 2 > shown_by).map(|(d, _)| Some((*d).to_owned()));
+        // The graph and digest more than half of the agents with a graph show; with no such majority, every agent
+        // differs.
+        let mode = counts.iter().find(|(_, n)| **n * 2 > shown_by).map(|((g, d), _)| (*g, Some((*d).to_owned())));
         let t_ms = self.now_ms();
         for s in &mut self.slots {
             let shown = match (&s.proc, &s.status) {
                 (None, _) => Shown::Down,
                 _ if s.paused => Shown::Paused,
                 (Some(_), Some((_, status))) if status.ready => {
-                    if mode.as_ref() == Some(&status.digest) {
+                    if mode.as_ref().is_some_and(|(graph, digest)| *graph == status.graph && *digest == status.digest) {
                         Shown::Agrees
                     } else {
                         Shown::Differs

@@ -158,7 +158,7 @@ pub enum Shown {
     Paused,
     /// Running, no graph yet.
     Joining,
-    /// Its digest is the one more than half of the agents with a graph show.
+    /// Its graph and digest are the ones more than half of the agents with a graph show.
     Agrees,
     /// Its digest differs from that majority's, or there is no majority.
     Differs,
