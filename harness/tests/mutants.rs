@@ -63,8 +63,10 @@ fn a_campaign_with_a_planted_protocol_bug_fails_with_exit_code_3() {
 /// The campaign catches the join wait that counts a stopped process's time, on real processes: a restarted agent
 /// stopped during its join wait for longer than the wait starts alone when it resumes, beside running agents that
 /// had the graph (the joins' rule of the verdict), though its fixed graph id lets anti-entropy merge it later. Seed
-/// 4 stops the new life 5 ms after its first status line, in its join wait (on separate hosts, discovery alone
-/// takes some 100 ms), for 2.9 s.
+/// 4 stops the new life 5 ms after its first status line, in its join wait, for 2.9 s; the campaign holds the
+/// peers' messages to it until it resumes, so a test process slowed by a loaded machine still stops it before an
+/// answer comes, and it resumes with none in its sockets (before, one such run in CI joined and the bug went
+/// unseen).
 #[test]
 fn a_campaign_catches_a_joiner_that_starts_alone_after_a_stop_during_its_start() {
     if !is_root() {

@@ -262,6 +262,36 @@ impl Campaign {
         Ok(())
     }
 
+    /// Kills `agent`, restarts it `down_ms` later and stops the new process at `at` for `stopped_ms`. Until it
+    /// resumes, the peers' messages do not reach it (its namespace holds the domain's user traffic; discovery
+    /// passes): however late this process gets to send the `SIGSTOP`, the new life is still waiting for a graph
+    /// when it comes, and no answer waits in its sockets when it resumes (it must ask again, as after a stop it
+    /// could not listen). Every agent in one namespace (`--same-host`) leaves nothing to hold, so there the stop's
+    /// timing alone decides.
+    fn stop_at_start(&mut self, agent: usize, down_ms: u64, at: StopPoint, stopped_ms: u64) -> Result<()> {
+        self.drain(agent)?;
+        self.signal(agent, "KILL")?;
+        if !self.config.same_host {
+            let hold = Filter { hold_data_of_domain: Some(self.config.domain), ..Filter::default() };
+            self.set_filters(&[(agent, hold)].into())?;
+        }
+        self.pump_for(Duration::from_millis(down_ms))?;
+        self.start(agent)?;
+        let after_ms = match at {
+            StopPoint::Building { after_ms } => after_ms,
+            StopPoint::Joining { after_ms } => {
+                // Its first status line: the agent exists and waits for a graph.
+                self.wait_until(|c| c.slots[agent].status.is_some(), Duration::from_secs(30))?;
+                after_ms
+            }
+        };
+        self.pump_for(Duration::from_millis(after_ms))?;
+        self.signal(agent, "STOP")?;
+        self.pump_for(Duration::from_millis(stopped_ms))?;
+        self.set_filters(&BTreeMap::new())?;
+        self.signal(agent, "CONT")
+    }
+
     fn episode(&mut self, index: usize, episode: &Episode) -> Result<EpisodeResult> {
         let start = Instant::now();
         let t_ms = self.elapsed_ms(start);
@@ -291,25 +321,9 @@ impl Campaign {
                 self.pump_for(fault_for / 3)?;
             }
             Fault::StopAtStart { agent, down_ms, at, stopped_ms } => {
-                let agent = *agent;
-                self.drain(agent)?;
-                self.signal(agent, "KILL")?;
-                self.pump_for(Duration::from_millis(*down_ms))?;
-                self.start(agent)?;
-                let after_ms = match at {
-                    StopPoint::Building { after_ms } => after_ms,
-                    StopPoint::Joining { after_ms } => {
-                        // Its first status line: the agent exists and waits for a graph.
-                        self.wait_until(|c| c.slots[agent].status.is_some(), Duration::from_secs(30))?;
-                        after_ms
-                    }
-                };
-                self.pump_for(Duration::from_millis(*after_ms))?;
-                self.signal(agent, "STOP")?;
-                self.pump_for(Duration::from_millis(*stopped_ms))?;
-                self.signal(agent, "CONT")?;
+                self.stop_at_start(*agent, *down_ms, *at, *stopped_ms)?;
                 // A life that hangs in its start fails the campaign here; heal once it has its graph and has written.
-                self.wait_until(|c| c.ready(agent), Duration::from_millis(self.config.settle_ms))?;
+                self.wait_until(|c| c.ready(*agent), Duration::from_millis(self.config.settle_ms))?;
                 self.pump_for(fault_for / 3)?;
             }
             other => self.set_filters(&filters_of(other, self.slots.len()))?,

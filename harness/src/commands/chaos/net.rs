@@ -4,7 +4,8 @@
 //!
 //! Every fault is written as input filters on the receiving side, by source address: random loss from some
 //! senders (`numgen random mod 100 < N drop`), a one-way cut (only one side filters), a partition (both sides
-//! filter), or an isolated namespace (nothing in or out on its interface). A namespace's whole rule set is replaced
+//! filter), an isolated namespace (nothing in or out on its interface), or held data (nothing arrives on the
+//! domain's RTPS user-traffic ports, while discovery on its metatraffic ports passes). A namespace's whole rule set is replaced
 //! atomically on every change. Nothing outside the campaign's own namespaces is touched: the host's namespace keeps
 //! its interfaces, routes and rules, and [`Network`]'s `Drop` deletes the namespaces (their veth pairs go with
 //! them); a campaign that was killed before it could do so has its namespaces removed by the next one.
@@ -24,6 +25,22 @@ pub struct Filter {
     pub drop_from: Vec<(BTreeSet<usize>, u8)>,
     /// Nothing in or out on the namespace's interface.
     pub isolated: bool,
+    /// Drop what arrives on this DDS domain's user-traffic ports ([`user_traffic_ports`]): the agents' messages
+    /// do not reach this one, while RTPS discovery (the metatraffic ports) goes on, so that it has found its peers
+    /// once the filter is lifted.
+    pub hold_data_of_domain: Option<u16>,
+}
+
+/// The UDP ports of a DDS domain's user traffic, by the RTPS default port mapping (RTPS 2.5, 9.6.1.1: `PB` 7400,
+/// `DG` 250, `PG` 2, `d2` 1, `d3` 11): the multicast port and the unicast port of every participant id rustdds
+/// tries (0 to 119). The metatraffic ports (`d0` 0, `d1` 10: SPDP and SEDP) are not among them. Ports past 65,535
+/// (domains above 232, which RTPS cannot use either) are left out.
+pub fn user_traffic_ports(domain: u16) -> Vec<u16> {
+    let base = 7400 + 250 * u32::from(domain);
+    std::iter::once(base + 1)
+        .chain((0..120).map(|participant| base + 11 + 2 * participant))
+        .filter_map(|port| u16::try_from(port).ok())
+        .collect()
 }
 
 /// The campaign's namespaces.
@@ -170,6 +187,10 @@ pub fn ruleset(filter: &Filter) -> String {
         let random = if *percent >= 100 { String::new() } else { format!("numgen random mod 100 < {percent} ") };
         input.push_str(&format!("    ip saddr {{ {} }} {random}drop\n", set.join(", ")));
     }
+    if let Some(domain) = filter.hold_data_of_domain {
+        let ports: Vec<String> = user_traffic_ports(domain).iter().map(u16::to_string).collect();
+        input.push_str(&format!("    iifname \"eth0\" udp dport {{ {} }} drop\n", ports.join(", ")));
+    }
     format!(
         "table inet chaos\ndelete table inet chaos\ntable inet chaos {{\n  chain input {{\n    type filter hook input \
          priority 0; policy accept;\n{input}  }}\n  chain output {{\n    type filter hook output priority 0; policy \
@@ -193,12 +214,21 @@ mod tests {
     fn rules_drop_by_source_at_a_rate_or_isolate() {
         let open = ruleset(&Filter::default());
         assert!(!open.contains("drop"), "{open}");
-        let filter = Filter { drop_from: vec![([1, 2].into(), 30), ([3].into(), 100)], isolated: false };
+        let filter = Filter {
+            drop_from: vec![([1, 2].into(), 30), ([3].into(), 100)],
+            isolated: false,
+            hold_data_of_domain: None,
+        };
         let rules = ruleset(&filter);
         assert!(rules.contains("ip saddr { 198.19.0.11, 198.19.0.12 } numgen random mod 100 < 30 drop"), "{rules}");
         assert!(rules.contains("ip saddr { 198.19.0.13 } drop"), "{rules}");
         let isolated = ruleset(&Filter { isolated: true, ..Filter::default() });
         assert!(isolated.contains("iifname \"eth0\" drop") && isolated.contains("oifname \"eth0\" drop"));
+        let held = ruleset(&Filter { hold_data_of_domain: Some(47), ..Filter::default() });
+        assert!(held.contains("iifname \"eth0\" udp dport { 19151, 19161, 19163, "), "{held}");
+        assert!(held.contains(", 19399 } drop"), "{held}");
+        // Discovery passes: SPDP multicast and the first participants' metatraffic unicast ports.
+        assert!(!held.contains("19150") && !held.contains("19160,") && !held.contains("19162"), "{held}");
         assert_eq!(stale_pid("cx1234-a0"), Some(1234));
         assert_eq!(stale_pid("cx1234-hub"), Some(1234));
         assert_eq!(stale_pid("mynet"), None);

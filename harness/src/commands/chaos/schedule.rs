@@ -65,7 +65,8 @@ pub enum Fault {
     },
     /// `SIGKILL`, a restart after `down_ms`, `SIGSTOP` of the new process during its start (`at`), `SIGCONT`
     /// `stopped_ms` later: the new life must not hang, and must take the running graph when it resumes (the time it
-    /// was stopped does not count against its join wait), not start alone.
+    /// was stopped does not count against its join wait), not start alone. Until it resumes, no peer's message
+    /// reaches the new life (discovery does), so the stop always finds it waiting for a graph.
     StopAtStart {
         /// The stopped agent.
         agent: usize,
