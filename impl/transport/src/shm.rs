@@ -231,7 +231,9 @@ impl ShmLane {
         let mut chunk = sample.payload_mut();
         for piece in pieces {
             let (head, rest) = chunk.split_at_mut(piece.len());
-            // A loop the compiler turns into one `memcpy` (`write_copy_of_slice` is newer than the workspace's MSRV).
+            // The compiler makes this a loop of 16-byte moves, not a call of `memcpy`; a `memcpy` here was no faster
+            // at 4 MiB (agents' p50 1,196 against 1,220 us, medians of five alternated runs of `cortex bench payload`,
+            // 2026-12-04), so the copy stays free of `unsafe`. `write_copy_of_slice` is newer than the MSRV.
             for (byte, &value) in head.iter_mut().zip(*piece) {
                 byte.write(value);
             }
