@@ -181,12 +181,12 @@ fn an_agent_in_another_network_namespace_is_reached_by_rtps_while_a_same_host_pa
     // Everything reached the other host by RTPS, its only path (as written or, for what a fault lost, repaired:
     // this test does not tell the two apart; transport/tests/hybrid.rs checks that pieces go by both paths). The
     // agents agree on nodes while the bridge still streams frames (in one CI run the count then was short of it),
-    // so the count is waited for, not read at once; a sample through shared memory fails at once.
-    let status = alone.wait_for(
+    // so the count is waited for, not read at once; a sample through shared memory fails at once (and `wait_for`
+    // fails on any rejected sample).
+    alone.wait_for(
         "the stream reached the other host by RTPS",
         Duration::from_secs(30),
         |s| s.samples_received >= before + 60,
         |s| s.shm_samples_received > 0,
     );
-    assert_eq!((status.shm_samples_received, status.rejected), (0, 0), "{status:?}");
 }
